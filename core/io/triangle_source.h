@@ -1,0 +1,78 @@
+// TriangleSource: every scene input (OBJ file, PLY file, procedural generator)
+// streams its triangles through this one interface, in primitive-id order, in
+// batches, so that memory does not grow with the input's size. TriangleSink is
+// the receiving end (the packer, a test, `outcore info` of an input).
+//
+// Contract: stream() delivers triangle k of the input as the k-th triangle over
+// all batches, where k is the brief's primitive_id (file order, polygons
+// fan-triangulated (v0,vi,vi+1), PLY strips expanded with alternating winding,
+// degenerate triangles kept). stream() may be called again and yields the same
+// triangles bit for bit. Errors name the file and line (or parameter). A sink
+// error stops the stream and is returned unchanged.
+//
+// Thread-safety: a source is used by one thread at a time.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "core/geometry/triangle.h"
+#include "core/util/status.h"
+
+namespace outcore {
+
+class TriangleSink {
+ public:
+  virtual ~TriangleSink() = default;
+  virtual Status consume(std::span<const Triangle> batch) = 0;
+};
+
+class TriangleSource {
+ public:
+  virtual ~TriangleSource() = default;
+  // What the user wrote (path or gen: spec); used in messages and the manifest.
+  virtual const std::string& description() const = 0;
+  virtual Status stream(TriangleSink& sink) = 0;
+};
+
+// Sink that forwards batches to a callable: Status(std::span<const Triangle>).
+template <class Fn>
+class CallbackSink final : public TriangleSink {
+ public:
+  explicit CallbackSink(Fn fn) : fn_(std::move(fn)) {}
+  Status consume(std::span<const Triangle> batch) override { return fn_(batch); }
+
+ private:
+  Fn fn_;
+};
+
+// Collects triangles into fixed-size batches for a sink; sources call add() per
+// triangle and finish() at the end.
+class TriangleBatcher {
+ public:
+  static constexpr std::size_t kBatchSize = 4096;
+  explicit TriangleBatcher(TriangleSink& sink) : sink_(sink) {}
+
+  Status add(const Triangle& t) {
+    buffer_[size_++] = t;
+    if (size_ == kBatchSize) return flush();
+    return Status::Ok();
+  }
+  Status flush() {
+    if (size_ == 0) return Status::Ok();
+    const std::size_t n = size_;
+    size_ = 0;
+    return sink_.consume(std::span<const Triangle>(buffer_.data(), n));
+  }
+  Status finish() { return flush(); }
+
+ private:
+  TriangleSink& sink_;
+  std::array<Triangle, kBatchSize> buffer_;
+  std::size_t size_ = 0;
+};
+
+}  // namespace outcore

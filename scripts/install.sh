@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs exactly what is missing for building, testing and benchmarking Outcore
+# on Debian 12: apt packages (all C++ dependencies) and a Python venv in .venv.
+# Idempotent: a second run installs nothing and takes a second or two.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+APT_PACKAGES=(
+  build-essential cmake ninja-build pkg-config clang-format
+  libembree-dev libopenvdb-dev libcereal-dev libxxhash-dev
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler grpc-proto
+  libspdlog-dev libtbb-dev libtinyobjloader-dev libcli11-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  python3-venv python3-dev
+)
+
+missing=()
+for p in "${APT_PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "[install] apt packages missing: ${missing[*]}"
+  SUDO=""
+  [ "$(id -u)" = 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+PY_REQS=scripts/requirements.txt
+if [ ! -x .venv/bin/python ]; then
+  echo "[install] creating .venv"
+  python3 -m venv .venv
+fi
+stamp=.venv/.requirements.sha
+want=$(sha256sum "$PY_REQS" | cut -d' ' -f1)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+  echo "[install] pip install -r $PY_REQS"
+  .venv/bin/pip install -q --upgrade pip >/dev/null
+  .venv/bin/pip install -q -r "$PY_REQS"
+  echo "$want" > "$stamp"
+fi
+echo "[install] ok"

@@ -1,0 +1,30 @@
+// Paths the tests need: the shared models folder and the built `outcore` binary.
+//
+// Thread-safety: pure functions.
+#pragma once
+
+#include <string>
+
+namespace outcore::testing {
+
+inline std::string model_path(const std::string& name) { return std::string(OUTCORE_MODELS_DIR) + "/" + name; }
+inline std::string outcore_binary() { return OUTCORE_BINARY; }
+
+// A fresh empty directory under the system temp dir, removed by the destructor.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::string& path() const { return path_; }
+  std::string file(const std::string& name) const { return path_ + "/" + name; }
+
+ private:
+  std::string path_;
+};
+
+// Writes text to a file (test fixtures), aborting the test on failure.
+void write_text_file(const std::string& path, const std::string& text);
+
+}  // namespace outcore::testing
