@@ -1,1 +1,16 @@
-int main() { return 0; }
+// The `outcore` command: one binary whose subcommands are implemented in the
+// component they belong to (core: pack, info; later server: serve; client: query).
+#include <CLI/CLI.hpp>
+
+#include "core/cli/commands.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"Outcore: out-of-core scene query service for ray tracing"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", OUTCORE_VERSION);
+  int exit_code = 1;
+  outcore::add_pack_command(app, exit_code);
+  outcore::add_info_command(app, exit_code);
+  CLI11_PARSE(app, argc, argv);
+  return exit_code;
+}

@@ -1,0 +1,64 @@
+#include <CLI/CLI.hpp>
+#include <unistd.h>
+
+#include <cstdio>
+#include <memory>
+
+#include "core/cli/commands.h"
+#include "core/gen/generator_factory.h"
+#include "core/store/scene_packer.h"
+#include "core/util/cancellation.h"
+#include "core/util/progress.h"
+
+namespace outcore {
+
+int report_command_error(const char* command, const std::string& message) {
+  std::fprintf(stderr, "outcore %s: error: %s\n", command, message.c_str());
+  return 1;
+}
+
+void add_pack_command(CLI::App& app, int& exit_code) {
+  auto options = std::make_shared<PackOptions>();
+  auto quiet = std::make_shared<bool>(false);
+  CLI::App* cmd = app.add_subcommand("pack", "Pack triangle inputs into an on-disk scene store");
+  std::string generators;
+  for (const auto& name : generator_names()) generators += (generators.empty() ? "" : ", ") + name;
+  cmd->add_option("inputs", options->inputs,
+                  "Inputs: .obj, .ply, or gen:NAME?key=value&... (generators: " + generators +
+                      "). geometry_id = position in this list")
+      ->required();
+  cmd->add_option("-o,--output", options->output, "Scene store directory to create")->required();
+  cmd->add_option("--brick-tris", options->brick_triangles, "Most triangles in one brick")
+      ->capture_default_str();
+  cmd->add_option("--mem-mb", options->memory_mb, "Peak memory bound for packing, MiB")->capture_default_str();
+  cmd->add_flag("--force", options->overwrite, "Replace an existing store at the output path");
+  auto no_sync = std::make_shared<bool>(false);
+  cmd->add_flag("--no-sync", *no_sync, "Skip fsync before the final rename (faster, not durable)");
+  cmd->add_flag("-q,--quiet", *quiet, "No progress bars");
+  cmd->callback([options, quiet, no_sync, &exit_code] {
+    options->show_progress = !*quiet;
+    options->sync = !*no_sync;
+    install_cancel_signal_handlers();
+    const auto result = pack_scene(*options);
+    if (!result.ok()) {
+      exit_code = report_command_error("pack", result.status().message());
+      return;
+    }
+    const PackSummary& s = *result;
+    std::printf("packed %llu triangles (%llu degenerate, kept) from %zu input%s into %u bricks\n",
+                static_cast<unsigned long long>(s.triangles), static_cast<unsigned long long>(s.degenerate_triangles),
+                options->inputs.size(), options->inputs.size() == 1 ? "" : "s", s.bricks);
+    std::printf("  brick triangles  min %u / median %u / max %u (target <= %u)\n", s.min_brick_triangles,
+                s.median_brick_triangles, s.max_brick_triangles, options->brick_triangles);
+    std::printf("  store            %s, %s on disk, upper hierarchy depth %u\n", options->output.c_str(),
+                human_bytes(static_cast<double>(s.bytes_on_disk)).c_str(), s.upper_depth);
+    std::printf("  time             %.2f s, %.2f M tris/s\n", s.seconds, s.triangles / 1e6 / std::max(s.seconds, 1e-9));
+    std::printf("  memory           peak RSS %s (bound --mem-mb %llu), out-of-core levels %u, spill %s\n",
+                human_bytes(static_cast<double>(s.peak_rss_bytes)).c_str(),
+                static_cast<unsigned long long>(options->memory_mb), s.out_of_core_levels,
+                human_bytes(static_cast<double>(s.spill_bytes_written)).c_str());
+    exit_code = 0;
+  });
+}
+
+}  // namespace outcore

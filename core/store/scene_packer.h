@@ -1,0 +1,63 @@
+// pack_scene: turns inputs (OBJ, PLY, gen: specs) into a scene store directory,
+// out of core. Peak memory is bounded by PackOptions::memory_mb, not by the
+// scene: a scan pass counts and bounds the triangles; scenes that fit are
+// partitioned in memory; larger ones are histogrammed on a centroid grid, cut
+// into groups that fit (centroid_grid.h), streamed into per-group spill files,
+// and each group is partitioned into bricks in memory (brick_partitioner.h),
+// recursing with a finer grid where one group is still too large. The fixed
+// upper hierarchy is built over the brick bounds at the end.
+//
+// The store appears atomically: everything is written into a temporary
+// directory beside the output, synced, and renamed into place; on any error
+// or cancellation (cancellation.h) the temporary directory is removed, and an
+// existing store at the output path is never touched unless overwrite is set.
+//
+// Thread-safety: reentrant; uses TBB internally.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/util/status.h"
+
+namespace outcore {
+
+struct PackOptions {
+  std::vector<std::string> inputs;  // geometry_id = position in this list
+  std::string output;               // the store directory to create
+  // Target brick size: no brick holds more triangles than this.
+  uint32_t brick_triangles = 32768;
+  // Peak memory bound for the packer's own data, in MiB (>= 32).
+  uint64_t memory_mb = 1024;
+  // Replace an existing store at `output` (after the new one is complete).
+  bool overwrite = false;
+  // fsync the store before the rename (durable against power loss).
+  bool sync = true;
+  // Progress bars on stderr.
+  bool show_progress = false;
+};
+
+struct PackSummary {
+  uint64_t triangles = 0;
+  uint64_t degenerate_triangles = 0;
+  uint32_t bricks = 0;
+  uint32_t min_brick_triangles = 0;
+  uint32_t median_brick_triangles = 0;
+  uint32_t max_brick_triangles = 0;
+  uint32_t upper_depth = 0;
+  uint64_t bytes_on_disk = 0;
+  uint64_t spill_bytes_written = 0;  // temporary data (0 when the scene fit in memory)
+  uint32_t out_of_core_levels = 0;   // 0: in memory; 1: one grid pass; more: recursion
+  double seconds = 0.0;
+  uint64_t peak_rss_bytes = 0;
+};
+
+Expected<PackSummary> pack_scene(const PackOptions& options);
+
+// Smallest accepted memory_mb.
+inline constexpr uint64_t kMinPackMemoryMb = 32;
+// Largest accepted brick size (bricks are built and loaded whole).
+inline constexpr uint32_t kMaxBrickTriangles = 1u << 24;
+
+}  // namespace outcore

@@ -1,0 +1,124 @@
+#include "core/util/buffered_file.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cstring>
+
+namespace outcore {
+
+namespace {
+Status write_fully(int fd, const char* data, std::size_t bytes, const std::string& path) {
+  while (bytes > 0) {
+    const ssize_t put = ::write(fd, data, bytes);
+    if (put < 0) {
+      if (errno == EINTR) continue;
+      return io_error_from_errno("cannot write " + path);
+    }
+    data += put;
+    bytes -= static_cast<std::size_t>(put);
+  }
+  return Status::Ok();
+}
+}  // namespace
+
+BufferedFileWriter::~BufferedFileWriter() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+Status BufferedFileWriter::create(const std::string& path, std::size_t buffer_bytes) {
+  path_ = path;
+  fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd_ < 0) return io_error_from_errno("cannot create " + path);
+  capacity_ = buffer_bytes;
+  buffer_.reserve(buffer_bytes);
+  written_ = 0;
+  return Status::Ok();
+}
+
+Status BufferedFileWriter::flush_buffer() {
+  OUTCORE_RETURN_IF_ERROR(write_fully(fd_, buffer_.data(), buffer_.size(), path_));
+  written_ += buffer_.size();
+  buffer_.clear();
+  return Status::Ok();
+}
+
+Status BufferedFileWriter::append(const void* data, std::size_t bytes) {
+  const char* src = static_cast<const char*>(data);
+  if (buffer_.size() + bytes > capacity_) {
+    OUTCORE_RETURN_IF_ERROR(flush_buffer());
+    if (bytes >= capacity_) {
+      OUTCORE_RETURN_IF_ERROR(write_fully(fd_, src, bytes, path_));
+      written_ += bytes;
+      return Status::Ok();
+    }
+  }
+  buffer_.insert(buffer_.end(), src, src + bytes);
+  return Status::Ok();
+}
+
+Status BufferedFileWriter::pad_to(uint64_t alignment) {
+  static const char kZeros[4096] = {};
+  uint64_t remainder = size() % alignment;
+  if (remainder == 0) return Status::Ok();
+  uint64_t padding = alignment - remainder;
+  while (padding > 0) {
+    const std::size_t step = static_cast<std::size_t>(std::min<uint64_t>(padding, sizeof kZeros));
+    OUTCORE_RETURN_IF_ERROR(append(kZeros, step));
+    padding -= step;
+  }
+  return Status::Ok();
+}
+
+Status BufferedFileWriter::close(bool sync) {
+  if (fd_ < 0) return Status::Ok();
+  Status status = flush_buffer();
+  if (status.ok() && sync && ::fsync(fd_) != 0) status = io_error_from_errno("cannot sync " + path_);
+  if (::close(fd_) != 0 && status.ok()) status = io_error_from_errno("cannot close " + path_);
+  fd_ = -1;
+  buffer_ = {};
+  return status;
+}
+
+Status read_file_chunks(const std::string& path, std::size_t record_bytes, std::size_t chunk_bytes,
+                        const std::function<Status(const char* data, std::size_t bytes)>& fn) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return io_error_from_errno("cannot open " + path);
+  posix_fadvise(fd, 0, 0, POSIX_FADV_SEQUENTIAL);
+  chunk_bytes = std::max(record_bytes, chunk_bytes / record_bytes * record_bytes);
+  std::vector<char> buffer(chunk_bytes);
+  std::size_t filled = 0;
+  Status status;
+  while (status.ok()) {
+    const ssize_t got = ::read(fd, buffer.data() + filled, chunk_bytes - filled);
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      status = io_error_from_errno("cannot read " + path);
+      break;
+    }
+    filled += static_cast<std::size_t>(got);
+    const bool at_end = got == 0;
+    if (filled == chunk_bytes || (at_end && filled > 0)) {
+      if (filled % record_bytes != 0) {
+        status = data_loss(path + " ends in a partial record");
+        break;
+      }
+      status = fn(buffer.data(), filled);
+      filled = 0;
+    }
+    if (at_end) break;
+  }
+  ::close(fd);
+  return status;
+}
+
+Status sync_directory(const std::string& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return io_error_from_errno("cannot open directory " + path);
+  Status status;
+  if (::fsync(fd) != 0) status = io_error_from_errno("cannot sync directory " + path);
+  ::close(fd);
+  return status;
+}
+
+}  // namespace outcore

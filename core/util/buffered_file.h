@@ -1,0 +1,56 @@
+// BufferedFileWriter / read_file_chunks: sequential file I/O with a fixed-size
+// buffer, for spill files and brick data where the whole file never fits in
+// memory. Writes go through write(2) (not mmap) so the page cache, not this
+// process, holds what was written.
+//
+// Thread-safety: a writer is used by one thread at a time.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/util/status.h"
+
+namespace outcore {
+
+class BufferedFileWriter {
+ public:
+  BufferedFileWriter() = default;
+  ~BufferedFileWriter();
+  BufferedFileWriter(const BufferedFileWriter&) = delete;
+  BufferedFileWriter& operator=(const BufferedFileWriter&) = delete;
+
+  // Creates a new file (fails if it exists) with a buffer of buffer_bytes.
+  Status create(const std::string& path, std::size_t buffer_bytes);
+  Status append(const void* data, std::size_t bytes);
+  // Appends zero bytes up to the next multiple of alignment.
+  Status pad_to(uint64_t alignment);
+  // Bytes appended so far (the offset of the next append).
+  uint64_t size() const { return written_ + buffer_.size(); }
+  // Flushes; with sync, also fsync()s so the data is durable before a rename.
+  Status close(bool sync);
+  const std::string& path() const { return path_; }
+
+ private:
+  Status flush_buffer();
+
+  std::string path_;
+  int fd_ = -1;
+  std::vector<char> buffer_;
+  std::size_t capacity_ = 0;
+  uint64_t written_ = 0;
+};
+
+// Reads path sequentially in chunks of at most chunk_bytes (a multiple of
+// record_bytes) and hands each chunk to fn. A file whose size is not a
+// multiple of record_bytes is DATA_LOSS.
+Status read_file_chunks(const std::string& path, std::size_t record_bytes, std::size_t chunk_bytes,
+                        const std::function<Status(const char* data, std::size_t bytes)>& fn);
+
+// fsync() a directory so a rename inside it is durable.
+Status sync_directory(const std::string& path);
+
+}  // namespace outcore
