@@ -1,5 +1,722 @@
+// PLY reader: header, then the elements in file order. The `vertex` element's
+// x, y, z (any numeric type, converted to float) are kept, 12 bytes a vertex;
+// `face` (list vertex_indices or vertex_index) and `tristrips` (list
+// vertex_indices, -1 restarts a strip) are streamed as triangles; every other
+// property and element is read past (list properties too, which is why binary
+// files need the full header). Faces may only use vertices already read, so
+// the `vertex` element must come first; the file is read in one pass through
+// a bounded buffer.
+//
+// Strip expansion, per strip s (the list split at -1), for i = 0..len-3:
+// i even -> (s[i], s[i+1], s[i+2]), i odd -> (s[i+1], s[i], s[i+2]), so that all
+// triangles share the first one's winding. Degenerate strip triangles (repeated
+// indices, used to join strips) are emitted too: they keep primitive ids equal
+// to positions in the expanded strip.
+//
+// ASCII bodies hold one element item per line; this is what every writer
+// produces, and it lets an error name the line of the offending item.
 #include "core/io/ply_reader.h"
+
+#include <algorithm>
+#include <bit>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <string_view>
+#include <system_error>
+#include <type_traits>
+#include <vector>
+
+#include "core/io/text_line_reader.h"
+
 namespace outcore {
-// TEMPORARY until the reader lands.
-Expected<std::unique_ptr<TriangleSource>> open_ply_file(const std::string& path) { return internal_error(path); }
+
+namespace {
+
+enum class ScalarType : std::uint8_t { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
+
+struct ScalarTypeName {
+  std::string_view name;
+  ScalarType type;
+};
+constexpr ScalarTypeName kScalarTypeNames[] = {
+    {"char", ScalarType::kInt8},       {"int8", ScalarType::kInt8},       {"uchar", ScalarType::kUint8},
+    {"uint8", ScalarType::kUint8},     {"short", ScalarType::kInt16},     {"int16", ScalarType::kInt16},
+    {"ushort", ScalarType::kUint16},   {"uint16", ScalarType::kUint16},   {"int", ScalarType::kInt32},
+    {"int32", ScalarType::kInt32},     {"uint", ScalarType::kUint32},     {"uint32", ScalarType::kUint32},
+    {"float", ScalarType::kFloat32},   {"float32", ScalarType::kFloat32}, {"double", ScalarType::kFloat64},
+    {"float64", ScalarType::kFloat64},
+};
+
+bool find_scalar_type(std::string_view name, ScalarType& type) {
+  for (const ScalarTypeName& entry : kScalarTypeNames) {
+    if (entry.name == name) {
+      type = entry.type;
+      return true;
+    }
+  }
+  return false;
+}
+
+const char* scalar_type_name(ScalarType type) {
+  switch (type) {
+    case ScalarType::kInt8: return "char";
+    case ScalarType::kUint8: return "uchar";
+    case ScalarType::kInt16: return "short";
+    case ScalarType::kUint16: return "ushort";
+    case ScalarType::kInt32: return "int";
+    case ScalarType::kUint32: return "uint";
+    case ScalarType::kFloat32: return "float";
+    case ScalarType::kFloat64: return "double";
+  }
+  return "?";
+}
+
+bool is_integer(ScalarType type) {
+  return type != ScalarType::kFloat32 && type != ScalarType::kFloat64;
+}
+
+// Calls fn(T{}) with T the C++ type of a PLY scalar type.
+template <class Fn>
+auto with_scalar_type(ScalarType type, Fn&& fn) {
+  switch (type) {
+    case ScalarType::kInt8: return fn(std::int8_t{});
+    case ScalarType::kUint8: return fn(std::uint8_t{});
+    case ScalarType::kInt16: return fn(std::int16_t{});
+    case ScalarType::kUint16: return fn(std::uint16_t{});
+    case ScalarType::kInt32: return fn(std::int32_t{});
+    case ScalarType::kUint32: return fn(std::uint32_t{});
+    case ScalarType::kFloat32: return fn(float{});
+    case ScalarType::kFloat64: break;
+  }
+  return fn(double{});
+}
+
+std::size_t scalar_size(ScalarType type) {
+  return with_scalar_type(type, [](auto zero) { return sizeof(zero); });
+}
+
+enum class PlyFormat { kAscii, kBinaryLittleEndian, kBinaryBigEndian };
+
+struct PlyProperty {
+  std::string name;
+  ScalarType type = ScalarType::kFloat32;  // for a list, the type of its items
+  bool is_list = false;
+  ScalarType count_type = ScalarType::kUint8;  // lists only
+};
+
+enum class ElementRole { kVertices, kFaces, kTriStrips, kIgnored };
+
+struct PlyElement {
+  std::string name;
+  std::uint64_t count = 0;
+  std::vector<PlyProperty> properties;
+  ElementRole role = ElementRole::kIgnored;
+  // Positions in properties of what the role uses (-1 if not there).
+  int x = -1, y = -1, z = -1;
+  int vertex_indices = -1;
+};
+
+struct PlyHeader {
+  PlyFormat format = PlyFormat::kAscii;
+  std::vector<PlyElement> elements;
+};
+
+// Shortest text that reads back as value ("1e+300", "nan"), for messages.
+std::string format_number(double value) {
+  char digits[64];
+  const auto written = std::to_chars(digits, digits + sizeof(digits), value);
+  return std::string(digits, written.ptr);
+}
+
+bool is_blank(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f';
+}
+
+// Splits a line into whitespace-separated tokens.
+class LineTokens {
+ public:
+  LineTokens() = default;
+  explicit LineTokens(std::string_view line) : cursor_(line.data()), end_(line.data() + line.size()) {}
+
+  bool next(std::string_view& token) {
+    while (cursor_ < end_ && is_blank(*cursor_)) ++cursor_;
+    if (cursor_ == end_) return false;
+    const char* start = cursor_;
+    while (cursor_ < end_ && !is_blank(*cursor_)) ++cursor_;
+    token = std::string_view(start, static_cast<std::size_t>(cursor_ - start));
+    return true;
+  }
+  bool empty() {
+    while (cursor_ < end_ && is_blank(*cursor_)) ++cursor_;
+    return cursor_ == end_;
+  }
+
+ private:
+  const char* cursor_ = nullptr;
+  const char* end_ = nullptr;
+};
+
+std::vector<std::string_view> split_tokens(std::string_view line) {
+  std::vector<std::string_view> tokens;
+  LineTokens cursor(line);
+  std::string_view token;
+  while (cursor.next(token)) tokens.push_back(token);
+  return tokens;
+}
+
+// Reads the header, leaving the reader at the first byte of the body.
+Expected<PlyHeader> parse_header(TextLineReader& reader) {
+  const std::string& path = reader.path();
+  auto error_at = [&](std::uint64_t line, const std::string& what) {
+    return invalid_argument(path + ":" + std::to_string(line) + ": " + what);
+  };
+  auto error = [&](const std::string& what) { return error_at(reader.line_number(), what); };
+
+  std::string_view line;
+  if (!reader.next_line(line)) {
+    OUTCORE_RETURN_IF_ERROR(reader.status());
+    return invalid_argument(path + ": empty file; expected a PLY header");
+  }
+  if (split_tokens(line) != std::vector<std::string_view>{"ply"}) {
+    return error("not a PLY file (the first line must be 'ply')");
+  }
+
+  PlyHeader header;
+  bool have_format = false;
+  bool have_vertices = false;
+  std::vector<std::uint64_t> element_lines;
+  for (;;) {
+    if (!reader.next_line(line)) {
+      OUTCORE_RETURN_IF_ERROR(reader.status());
+      return invalid_argument(path + ": the PLY header has no 'end_header' line");
+    }
+    const std::vector<std::string_view> tokens = split_tokens(line);
+    if (tokens.empty() || tokens[0] == "comment" || tokens[0] == "obj_info") continue;
+    const std::string_view keyword = tokens[0];
+    if (keyword == "end_header") {
+      if (tokens.size() != 1) return error("expected 'end_header' alone on its line");
+      break;
+    }
+    if (keyword == "format") {
+      if (have_format) return error("second 'format' line");
+      if (tokens.size() != 3) {
+        return error("expected 'format ascii|binary_little_endian|binary_big_endian 1.0'");
+      }
+      if (tokens[1] == "ascii") {
+        header.format = PlyFormat::kAscii;
+      } else if (tokens[1] == "binary_little_endian") {
+        header.format = PlyFormat::kBinaryLittleEndian;
+      } else if (tokens[1] == "binary_big_endian") {
+        header.format = PlyFormat::kBinaryBigEndian;
+      } else {
+        return error("unsupported PLY format '" + std::string(tokens[1]) +
+                     "' (expected ascii, binary_little_endian or binary_big_endian)");
+      }
+      if (tokens[2] != "1.0") {
+        return error("unsupported PLY version '" + std::string(tokens[2]) + "' (expected 1.0)");
+      }
+      have_format = true;
+    } else if (keyword == "element") {
+      if (!have_format) return error("'element' before the 'format' line");
+      PlyElement element;
+      std::uint64_t count = 0;
+      const auto parsed_count =
+          tokens.size() == 3 ? std::from_chars(tokens[2].data(), tokens[2].data() + tokens[2].size(), count)
+                             : std::from_chars_result{nullptr, std::errc::invalid_argument};
+      if (parsed_count.ec != std::errc() || parsed_count.ptr != tokens[2].data() + tokens[2].size()) {
+        return error("expected 'element NAME COUNT' with COUNT a non-negative integer, got '" +
+                     std::string(line) + "'");
+      }
+      element.name = std::string(tokens[1]);
+      element.count = count;
+      if (element.name == "vertex") {
+        if (have_vertices) return error("second 'vertex' element");
+        have_vertices = true;
+        element.role = ElementRole::kVertices;
+      } else if (element.name == "face" || element.name == "tristrips") {
+        if (!have_vertices) {
+          return error("element '" + element.name +
+                       "' comes before element 'vertex'; vertices must precede the faces that use them");
+        }
+        element.role = element.name == "face" ? ElementRole::kFaces : ElementRole::kTriStrips;
+      }
+      header.elements.push_back(std::move(element));
+      element_lines.push_back(reader.line_number());
+    } else if (keyword == "property") {
+      if (header.elements.empty()) return error("'property' before any 'element'");
+      PlyProperty property;
+      const bool is_list = tokens.size() >= 2 && tokens[1] == "list";
+      if (is_list ? tokens.size() != 5 : tokens.size() != 3) {
+        return error("expected 'property TYPE NAME' or 'property list COUNT_TYPE ITEM_TYPE NAME', got '" +
+                     std::string(line) + "'");
+      }
+      property.is_list = is_list;
+      const std::string_view type_name = is_list ? tokens[3] : tokens[1];
+      if (!find_scalar_type(type_name, property.type)) {
+        return error("unknown property type '" + std::string(type_name) + "'");
+      }
+      if (is_list) {
+        if (!find_scalar_type(tokens[2], property.count_type)) {
+          return error("unknown property type '" + std::string(tokens[2]) + "'");
+        }
+        if (!is_integer(property.count_type)) {
+          return error("list count type must be an integer type, got '" + std::string(tokens[2]) + "'");
+        }
+      }
+      property.name = std::string(tokens.back());
+      header.elements.back().properties.push_back(std::move(property));
+    } else {
+      return error("unknown PLY header keyword '" + std::string(keyword) + "'");
+    }
+  }
+  if (!have_format) return error("the PLY header has no 'format' line");
+
+  // Find what each role needs, naming the element's line if it is missing.
+  for (std::size_t e = 0; e < header.elements.size(); ++e) {
+    PlyElement& element = header.elements[e];
+    const auto find = [&](std::string_view name) {
+      for (std::size_t p = 0; p < element.properties.size(); ++p) {
+        if (element.properties[p].name == name) return static_cast<int>(p);
+      }
+      return -1;
+    };
+    if (element.role == ElementRole::kVertices) {
+      int* positions[] = {&element.x, &element.y, &element.z};
+      const char* names[] = {"x", "y", "z"};
+      for (int axis = 0; axis < 3; ++axis) {
+        *positions[axis] = find(names[axis]);
+        if (*positions[axis] < 0) {
+          return error_at(element_lines[e],
+                          std::string("element 'vertex' has no property '") + names[axis] + "'");
+        }
+        if (element.properties[static_cast<std::size_t>(*positions[axis])].is_list) {
+          return error_at(element_lines[e], std::string("property '") + names[axis] +
+                                                "' of element 'vertex' is a list; expected a number");
+        }
+      }
+    } else if (element.role == ElementRole::kFaces || element.role == ElementRole::kTriStrips) {
+      element.vertex_indices = find("vertex_indices");
+      if (element.vertex_indices < 0 && element.role == ElementRole::kFaces) {
+        element.vertex_indices = find("vertex_index");
+      }
+      if (element.vertex_indices < 0) {
+        return error_at(element_lines[e],
+                        "element '" + element.name + "' has no list property 'vertex_indices'" +
+                            (element.role == ElementRole::kFaces ? " (or 'vertex_index')" : ""));
+      }
+      const PlyProperty& indices = element.properties[static_cast<std::size_t>(element.vertex_indices)];
+      if (!indices.is_list || !is_integer(indices.type)) {
+        return error_at(element_lines[e], "property '" + indices.name + "' of element '" + element.name +
+                                              "' must be a list of integers");
+      }
+    }
+  }
+  return header;
+}
+
+enum class ReadResult { kOk, kEndOfFile, kMalformed };
+
+// Reads values of a binary body in the file's byte order.
+class BinaryBody {
+ public:
+  BinaryBody(TextLineReader& reader, bool big_endian)
+      : reader_(reader), swap_(big_endian != (std::endian::native == std::endian::big)) {}
+
+  std::string location() const { return reader_.path(); }
+  const std::string& problem() const { return problem_; }
+
+  ReadResult begin_item() { return ReadResult::kOk; }
+  ReadResult end_item() { return ReadResult::kOk; }
+
+  ReadResult read_number(ScalarType type, double& value) {
+    return with_scalar_type(type, [&](auto zero) {
+      decltype(zero) raw;
+      if (!read_raw(raw)) return ReadResult::kEndOfFile;
+      value = static_cast<double>(raw);
+      return ReadResult::kOk;
+    });
+  }
+
+  // type is an integer type (the header checked).
+  ReadResult read_integer(ScalarType type, std::int64_t& value) {
+    return with_scalar_type(type, [&](auto zero) {
+      using T = decltype(zero);
+      if constexpr (std::is_floating_point_v<T>) {
+        problem_ = "internal: integer expected of a non-integer type";  // the header check prevents this
+        return ReadResult::kMalformed;
+      } else {
+        T raw;
+        if (!read_raw(raw)) return ReadResult::kEndOfFile;
+        value = static_cast<std::int64_t>(raw);
+        return ReadResult::kOk;
+      }
+    });
+  }
+
+  ReadResult skip(const PlyProperty& property) {
+    std::uint64_t items = 1;
+    if (property.is_list) {
+      std::int64_t count = 0;
+      const ReadResult result = read_integer(property.count_type, count);
+      if (result != ReadResult::kOk) return result;
+      if (count < 0) {
+        problem_ = "list '" + property.name + "' has a negative length " + std::to_string(count);
+        return ReadResult::kMalformed;
+      }
+      items = static_cast<std::uint64_t>(count);
+    }
+    return reader_.skip_bytes(items * scalar_size(property.type)) ? ReadResult::kOk : ReadResult::kEndOfFile;
+  }
+
+ private:
+  template <class T>
+  bool read_raw(T& value) {
+    unsigned char bytes[sizeof(T)];
+    if (!reader_.read_bytes(bytes, sizeof(T))) return false;
+    if (swap_) std::reverse(bytes, bytes + sizeof(T));
+    std::memcpy(&value, bytes, sizeof(T));
+    return true;
+  }
+
+  TextLineReader& reader_;
+  bool swap_;
+  std::string problem_;
+};
+
+// Reads values of an ascii body: one element item per line.
+class AsciiBody {
+ public:
+  explicit AsciiBody(TextLineReader& reader) : reader_(reader) {}
+
+  std::string location() const { return reader_.path() + ":" + std::to_string(reader_.line_number()); }
+  const std::string& problem() const { return problem_; }
+
+  ReadResult begin_item() {
+    std::string_view line;
+    do {
+      if (!reader_.next_line(line)) return ReadResult::kEndOfFile;
+      tokens_ = LineTokens(line);
+    } while (tokens_.empty());
+    return ReadResult::kOk;
+  }
+
+  ReadResult end_item() {
+    std::string_view extra;
+    if (!tokens_.next(extra)) return ReadResult::kOk;
+    problem_ = "unexpected extra value '" + std::string(extra) + "' (more values than the header declares)";
+    return ReadResult::kMalformed;
+  }
+
+  ReadResult read_number(ScalarType type, double& value) {
+    std::string_view token;
+    if (!next_token(token)) return ReadResult::kMalformed;
+    if (is_integer(type)) {
+      std::int64_t integer = 0;
+      const ReadResult result = parse_integer(type, token, integer);
+      value = static_cast<double>(integer);
+      return result;
+    }
+    NumberParse parsed = NumberParse::kOk;
+    if (type == ScalarType::kFloat32) {
+      // Parsed as float directly: rounding through double could differ by an ulp.
+      float narrow = 0;
+      parsed = parse_real(token, narrow);
+      value = narrow;
+    } else {
+      parsed = parse_real(token, value);
+    }
+    switch (parsed) {
+      case NumberParse::kOk: return ReadResult::kOk;
+      case NumberParse::kGarbled:
+        problem_ = "expected a number (" + std::string(scalar_type_name(type)) + "), got '" +
+                   std::string(token) + "'";
+        return ReadResult::kMalformed;
+      case NumberParse::kTooLarge: break;
+    }
+    problem_ = "value " + std::string(token) + " is too large for type " + scalar_type_name(type);
+    return ReadResult::kMalformed;
+  }
+
+  ReadResult read_integer(ScalarType type, std::int64_t& value) {
+    std::string_view token;
+    if (!next_token(token)) return ReadResult::kMalformed;
+    return parse_integer(type, token, value);
+  }
+
+  ReadResult skip(const PlyProperty& property) {
+    std::uint64_t items = 1;
+    if (property.is_list) {
+      std::int64_t count = 0;
+      const ReadResult result = read_integer(property.count_type, count);
+      if (result != ReadResult::kOk) return result;
+      if (count < 0) {
+        problem_ = "list '" + property.name + "' has a negative length " + std::to_string(count);
+        return ReadResult::kMalformed;
+      }
+      items = static_cast<std::uint64_t>(count);
+    }
+    // Skipped values are still checked: a garbled one means a damaged file.
+    for (std::uint64_t i = 0; i < items; ++i) {
+      double ignored = 0;
+      const ReadResult result = read_number(property.type, ignored);
+      if (result != ReadResult::kOk) return result;
+    }
+    return ReadResult::kOk;
+  }
+
+  // After the last element: only blank lines may follow.
+  ReadResult check_no_more_items() {
+    if (begin_item() == ReadResult::kEndOfFile) return ReadResult::kOk;
+    problem_ = "unexpected data after the last element (the header declares fewer items)";
+    return ReadResult::kMalformed;
+  }
+
+ private:
+  bool next_token(std::string_view& token) {
+    if (tokens_.next(token)) return true;
+    problem_ = "line ends early (fewer values than the header declares)";
+    return false;
+  }
+
+  ReadResult parse_integer(ScalarType type, std::string_view token, std::int64_t& value) {
+    const char* last = token.data() + token.size();
+    auto [end, error] = std::from_chars(token.data(), last, value);
+    if (error != std::errc() || end != last) {
+      problem_ = "expected an integer (" + std::string(scalar_type_name(type)) + "), got '" +
+                 std::string(token) + "'";
+      return ReadResult::kMalformed;
+    }
+    const bool fits = with_scalar_type(type, [&](auto zero) {
+      using T = decltype(zero);
+      if constexpr (std::is_floating_point_v<T>) {
+        return true;
+      } else {
+        return value >= static_cast<std::int64_t>(std::numeric_limits<T>::min()) &&
+               value <= static_cast<std::int64_t>(std::numeric_limits<T>::max());
+      }
+    });
+    if (!fits) {
+      problem_ = "value " + std::string(token) + " does not fit in type " + scalar_type_name(type);
+      return ReadResult::kMalformed;
+    }
+    return ReadResult::kOk;
+  }
+
+  TextLineReader& reader_;
+  LineTokens tokens_;
+  std::string problem_;
+};
+
+// State of one pass over the file; one per stream() call so that calls are
+// independent and yield identical triangles.
+class PlyPass {
+ public:
+  PlyPass(const std::string& path, TriangleSink& sink) : path_(path), batcher_(sink) {}
+
+  Status run() {
+    OUTCORE_RETURN_IF_ERROR(reader_.open(path_));
+    OUTCORE_ASSIGN_OR_RETURN(header_, parse_header(reader_));
+    if (header_.format == PlyFormat::kAscii) {
+      AsciiBody body(reader_);
+      OUTCORE_RETURN_IF_ERROR(read_elements(body));
+      if (body.check_no_more_items() != ReadResult::kOk) {
+        OUTCORE_RETURN_IF_ERROR(reader_.status());
+        return invalid_argument(body.location() + ": " + body.problem());
+      }
+    } else {
+      BinaryBody body(reader_, header_.format == PlyFormat::kBinaryBigEndian);
+      OUTCORE_RETURN_IF_ERROR(read_elements(body));
+    }
+    OUTCORE_RETURN_IF_ERROR(reader_.status());
+    return batcher_.finish();
+  }
+
+ private:
+  template <class Body>
+  Status read_elements(Body& body) {
+    for (const PlyElement& element : header_.elements) {
+      switch (element.role) {
+        case ElementRole::kVertices: OUTCORE_RETURN_IF_ERROR(read_vertices(body, element)); break;
+        case ElementRole::kFaces:
+        case ElementRole::kTriStrips: OUTCORE_RETURN_IF_ERROR(read_polygons(body, element)); break;
+        case ElementRole::kIgnored: OUTCORE_RETURN_IF_ERROR(skip_element(body, element)); break;
+      }
+    }
+    return Status::Ok();
+  }
+
+  // Turns a failed read into its Status: an I/O error, a truncated file, or
+  // the body's description of a malformed value.
+  template <class Body>
+  Status read_failure(const Body& body, ReadResult result, const PlyElement& element,
+                      std::uint64_t item) const {
+    if (!reader_.status().ok()) return reader_.status();
+    if (result == ReadResult::kEndOfFile) {
+      return invalid_argument(path_ + ": unexpected end of file in element '" + element.name + "' at index " +
+                              std::to_string(item) + " (the header declares " +
+                              std::to_string(element.count) + ")");
+    }
+    return item_error(body, element, item, body.problem());
+  }
+
+  template <class Body>
+  Status item_error(const Body& body, const PlyElement& element, std::uint64_t item,
+                    const std::string& what) const {
+    return invalid_argument(body.location() + ": " + element.name + " " + std::to_string(item) + ": " + what);
+  }
+
+  template <class Body>
+  Status skip_element(Body& body, const PlyElement& element) {
+    for (std::uint64_t item = 0; item < element.count; ++item) {
+      ReadResult result = body.begin_item();
+      for (std::size_t p = 0; result == ReadResult::kOk && p < element.properties.size(); ++p) {
+        result = body.skip(element.properties[p]);
+      }
+      if (result == ReadResult::kOk) result = body.end_item();
+      if (result != ReadResult::kOk) return read_failure(body, result, element, item);
+    }
+    return Status::Ok();
+  }
+
+  template <class Body>
+  Status read_vertices(Body& body, const PlyElement& element) {
+    static constexpr char kAxes[] = "xyz";
+    // Capped: the count is the file's claim, not yet checked against its size.
+    vertices_.reserve(
+        static_cast<std::size_t>(std::min<std::uint64_t>(element.count, std::uint64_t{1} << 24)));
+    for (std::uint64_t item = 0; item < element.count; ++item) {
+      double xyz[3] = {0, 0, 0};
+      ReadResult result = body.begin_item();
+      for (std::size_t p = 0; result == ReadResult::kOk && p < element.properties.size(); ++p) {
+        const int position = static_cast<int>(p);
+        const int axis = position == element.x   ? 0
+                         : position == element.y ? 1
+                         : position == element.z ? 2
+                                                 : -1;
+        result = axis >= 0 ? body.read_number(element.properties[p].type, xyz[axis])
+                           : body.skip(element.properties[p]);
+      }
+      if (result == ReadResult::kOk) result = body.end_item();
+      if (result != ReadResult::kOk) return read_failure(body, result, element, item);
+      Vec3f position;
+      for (int axis = 0; axis < 3; ++axis) {
+        position[axis] = static_cast<float>(xyz[axis]);
+        if (!std::isfinite(position[axis])) {
+          return item_error(body, element, item,
+                            std::string("coordinate ") + kAxes[axis] + " is not finite in float32 (" +
+                                format_number(xyz[axis]) + ")");
+        }
+      }
+      vertices_.push_back(position);
+    }
+    return Status::Ok();
+  }
+
+  // Faces are fanned (c0, c(j-1), cj) as corner j >= 2 is read; strips emit
+  // one triangle per index from the third of each strip on. Either way no
+  // per-item storage is needed, so a strip may be arbitrarily long.
+  template <class Body>
+  Status read_polygons(Body& body, const PlyElement& element) {
+    const bool strips = element.role == ElementRole::kTriStrips;
+    const auto vertex_count = static_cast<std::int64_t>(vertices_.size());
+    for (std::uint64_t item = 0; item < element.count; ++item) {
+      ReadResult result = body.begin_item();
+      for (std::size_t p = 0; result == ReadResult::kOk && p < element.properties.size(); ++p) {
+        const PlyProperty& property = element.properties[p];
+        if (static_cast<int>(p) != element.vertex_indices) {
+          result = body.skip(property);
+          continue;
+        }
+        std::int64_t count = 0;
+        result = body.read_integer(property.count_type, count);
+        if (result != ReadResult::kOk) break;
+        if (!strips && count < 3) {
+          return item_error(body, element, item,
+                            "has " + std::to_string(count) + " corner" + (count == 1 ? "" : "s") +
+                                "; at least 3 are needed");
+        }
+        if (count < 0) {
+          return item_error(body, element, item, "list has a negative length " + std::to_string(count));
+        }
+        // Corners of the current face or strip: the first (faces) or the two
+        // before (strips), and how many have been read.
+        std::size_t a = 0, b = 0;
+        std::int64_t in_strip = 0;
+        for (std::int64_t j = 0; j < count; ++j) {
+          std::int64_t index = 0;
+          result = body.read_integer(property.type, index);
+          if (result != ReadResult::kOk) break;
+          if (strips && index == -1) {
+            in_strip = 0;
+            continue;
+          }
+          if (index < 0 || index >= vertex_count) {
+            return item_error(body, element, item,
+                              "vertex index " + std::to_string(index) + " out of range (" +
+                                  std::to_string(vertex_count) + " vertices)" +
+                                  (strips ? " at list position " + std::to_string(j) : std::string()));
+          }
+          const auto c = static_cast<std::size_t>(index);
+          if (in_strip >= 2) {
+            const bool flip = strips && (in_strip - 2) % 2 == 1;
+            const Triangle triangle = flip ? Triangle{vertices_[b], vertices_[a], vertices_[c]}
+                                           : Triangle{vertices_[a], vertices_[b], vertices_[c]};
+            OUTCORE_RETURN_IF_ERROR(batcher_.add(triangle));
+          }
+          if (strips) {
+            a = b;
+            b = c;
+          } else if (in_strip == 0) {
+            a = c;
+          } else {
+            b = c;
+          }
+          ++in_strip;
+        }
+      }
+      if (result == ReadResult::kOk) result = body.end_item();
+      if (result != ReadResult::kOk) return read_failure(body, result, element, item);
+    }
+    return Status::Ok();
+  }
+
+  const std::string& path_;
+  TextLineReader reader_;
+  PlyHeader header_;
+  std::vector<Vec3f> vertices_;
+  TriangleBatcher batcher_;
+};
+
+class PlySource final : public TriangleSource {
+ public:
+  explicit PlySource(std::string path) : path_(std::move(path)) {}
+
+  const std::string& description() const override { return path_; }
+
+  Status stream(TriangleSink& sink) override {
+    // On the heap: the batcher's buffer is too large for a small thread stack.
+    auto pass = std::make_unique<PlyPass>(path_, sink);
+    return pass->run();
+  }
+
+ private:
+  std::string path_;
+};
+
+}  // namespace
+
+Expected<std::unique_ptr<TriangleSource>> open_ply_file(const std::string& path) {
+  // The header is checked now so that a wrong file fails before any work; each
+  // stream() reads it again, as the body cannot be read without it.
+  TextLineReader reader;
+  OUTCORE_RETURN_IF_ERROR(reader.open(path));
+  OUTCORE_ASSIGN_OR_RETURN(PlyHeader header, parse_header(reader));
+  (void)header;
+  return std::unique_ptr<TriangleSource>(std::make_unique<PlySource>(path));
+}
+
 }  // namespace outcore
