@@ -29,6 +29,8 @@ class Generator : public TriangleSource {
  public:
   const std::string& description() const override { return description_; }
   Status stream(TriangleSink& sink) override;
+  // Generating runs at 50-250 M triangles/s: faster than any disk round trip.
+  bool cheap_to_restream() const override { return true; }
 
   // Exact number of triangles stream() delivers.
   virtual uint64_t triangle_count() const = 0;

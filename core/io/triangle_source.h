@@ -36,6 +36,10 @@ class TriangleSource {
   // What the user wrote (path or gen: spec); used in messages and the manifest.
   virtual const std::string& description() const = 0;
   virtual Status stream(TriangleSink& sink) = 0;
+  // True when streaming again costs less than writing the triangles to disk
+  // and reading them back (generators); the packer then re-streams instead of
+  // spilling.
+  virtual bool cheap_to_restream() const { return false; }
 };
 
 // Sink that forwards batches to a callable: Status(std::span<const Triangle>).

@@ -20,8 +20,8 @@ constexpr std::size_t kParallelThreshold = 1 << 16;
 // kSampleSize triangles: the SAH estimate barely changes, and the top levels
 // then cost one partition pass instead of a binning pass too. Stats derived
 // from a sample are only used to place bins; brick bounds are always exact.
-constexpr std::size_t kSampleThreshold = 1 << 18;
-constexpr std::size_t kSampleSize = 1 << 16;
+constexpr std::size_t kSampleThreshold = 1 << 16;
+constexpr std::size_t kSampleSize = 1 << 13;
 
 // What a node knows about its triangles; children get theirs from the parent's
 // bins, so every level costs one binning pass and one partition pass.

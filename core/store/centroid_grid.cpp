@@ -55,6 +55,13 @@ class GroupPlanner {
   }
 
  private:
+  // Triangles plus half a group's worth per group the side will need: fuller
+  // groups mean fewer passes over the input.
+  double side_cost(uint64_t count) const {
+    const uint64_t groups = (count + max_group_ - 1) / max_group_;
+    return static_cast<double>(count) + 0.5 * static_cast<double>(max_group_) * static_cast<double>(groups);
+  }
+
   uint32_t index(uint32_t x, uint32_t y, uint32_t z) const { return (z * res_[1] + y) * res_[0] + x; }
 
   template <class Fn>
@@ -86,14 +93,14 @@ class GroupPlanner {
         for (uint32_t k = slabs; k-- > 1;) {
           right.count += slab[k].count;
           right.bounds.extend(slab[k].bounds);
-          right_cost[k] = right.count ? right.bounds.half_area() * static_cast<double>(right.count) : -1.0;
+          right_cost[k] = right.count ? right.bounds.half_area() * side_cost(right.count) : -1.0;
         }
         CellStats left;
         for (uint32_t k = 0; k + 1 < slabs; ++k) {
           left.count += slab[k].count;
           left.bounds.extend(slab[k].bounds);
           if (left.count == 0 || right_cost[k + 1] < 0.0) continue;
-          const double cost = left.bounds.half_area() * static_cast<double>(left.count) + right_cost[k + 1];
+          const double cost = left.bounds.half_area() * side_cost(left.count) + right_cost[k + 1];
           if (cost < best_cost) {
             best_cost = cost;
             best_axis = axis;
@@ -104,8 +111,13 @@ class GroupPlanner {
     }
     if (best_axis < 0) {
       const uint32_t group = plan_.group_count++;
+      plan_.group_counts.push_back(0);
+      plan_.group_centroid_bounds.emplace_back();
       for_each_cell(box, [&](uint32_t i, auto) {
-        if (cells_[i].count) plan_.cell_to_group[i] = group;
+        if (cells_[i].count == 0) return;
+        plan_.cell_to_group[i] = group;
+        plan_.group_counts[group] += cells_[i].count;
+        plan_.group_centroid_bounds[group].extend(cells_[i].centroid_bounds);
       });
       return;
     }

@@ -42,12 +42,15 @@ class CentroidGrid {
 
 struct CellStats {
   uint64_t count = 0;
-  Aabb bounds;  // of the triangles whose centroid falls in the cell
+  Aabb bounds;           // of the triangles whose centroid falls in the cell
+  Aabb centroid_bounds;  // of their centroids
 };
 
 struct GroupPlan {
   uint32_t group_count = 0;
   std::vector<uint32_t> cell_to_group;  // kNoGroup for empty cells
+  std::vector<uint64_t> group_counts;
+  std::vector<Aabb> group_centroid_bounds;
   static constexpr uint32_t kNoGroup = 0xffffffffu;
 };
 

@@ -33,7 +33,7 @@ constexpr uint64_t kMiB = 1024 * 1024;
 // Memory the packer sets aside for everything but the in-memory triangle group:
 // the centroid grid (kGridCells x 36 B), spill and brick write buffers, batches.
 constexpr uint32_t kGridCells = 1u << 18;
-constexpr uint64_t kBrickBufferBytes = 4 * kMiB;
+constexpr uint64_t kBrickBufferBytes = 4 * kMiB;  // two of them: the brick file writes asynchronously
 constexpr uint64_t kStagingBytes = 1 * kMiB;
 constexpr uint64_t kReadChunkBytes = 4 * kMiB;
 constexpr uint32_t kMaxGroupsPerLevel = 256;
@@ -42,6 +42,12 @@ constexpr uint32_t kMaxRecursionDepth = 16;
 using PackedBatchFn = std::function<Status(std::span<const PackedTriangle>)>;
 // A re-streamable set of tagged triangles: the inputs themselves or a spill file.
 using PackedStream = std::function<Status(const PackedBatchFn&)>;
+struct SourceStream {
+  PackedStream stream;
+  bool cheap = false;  // re-streaming beats a spill round trip
+};
+// Which group a triangle (and its position in the stream) belongs to.
+using GroupFn = std::function<uint32_t(const PackedTriangle&, uint64_t)>;
 
 // Removes the temporary directory unless the pack succeeded.
 class TemporaryDirectory {
@@ -84,10 +90,10 @@ class ScenePacker {
   Status open_sources();
   Status scan();
   PackedStream input_stream();
-  Status pack_stream(const PackedStream& stream, uint64_t count, const Aabb& centroid_bounds, uint32_t depth);
-  Status pack_sequential_chunks(const PackedStream& stream, uint64_t count, uint32_t depth);
-  Status distribute(const PackedStream& stream, uint64_t count, uint32_t group_count,
-                    const std::function<uint32_t(const PackedTriangle&, uint64_t)>& group_of, uint32_t depth);
+  Status pack_stream(const SourceStream& source, uint64_t count, const Aabb& centroid_bounds, uint32_t depth);
+  Status pack_sequential_chunks(const SourceStream& source, uint64_t count, uint32_t depth);
+  Status distribute(const SourceStream& source, uint64_t count, const GroupPlan& plan, const GroupFn& group_of,
+                    uint32_t depth);
   Status build_group_in_memory(const PackedStream& stream, uint64_t count);
   Status write_brick(std::span<const PackedTriangle> triangles, const Aabb& bounds);
   Status check_cancel() const { return cancel_requested() ? cancelled("pack interrupted") : Status::Ok(); }
@@ -260,17 +266,46 @@ Status ScenePacker::build_group_in_memory(const PackedStream& stream, uint64_t c
   return Status::Ok();
 }
 
-Status ScenePacker::distribute(const PackedStream& stream, uint64_t count, uint32_t group_count,
-                               const std::function<uint32_t(const PackedTriangle&, uint64_t)>& group_of,
-                               uint32_t depth) {
+Status ScenePacker::distribute(const SourceStream& source, uint64_t count, const GroupPlan& plan,
+                               const GroupFn& group_of, uint32_t depth) {
+  const uint32_t group_count = plan.group_count;
+  auto recurse = [&](uint32_t g, const SourceStream& group_stream) -> Status {
+    // A group that did not shrink cannot be helped by a finer grid.
+    if (plan.group_counts[g] == count) return pack_sequential_chunks(group_stream, plan.group_counts[g], depth + 1);
+    return pack_stream(group_stream, plan.group_counts[g], plan.group_centroid_bounds[g], depth + 1);
+  };
+
+  if (source.cheap) {
+    // Re-stream the source once per group, keeping that group's triangles:
+    // cheaper than a disk round trip for generated scenes.
+    for (uint32_t g = 0; g < group_count; ++g) {
+      if (plan.group_counts[g] == 0) continue;
+      const PackedStream& parent = source.stream;
+      SourceStream filtered{[&parent, &group_of, g](const PackedBatchFn& fn) -> Status {
+                              std::vector<PackedTriangle> kept;
+                              kept.reserve(TriangleBatcher::kBatchSize);
+                              uint64_t sequence = 0;
+                              return parent([&](std::span<const PackedTriangle> batch) -> Status {
+                                kept.clear();
+                                for (const PackedTriangle& p : batch) {
+                                  if (group_of(p, sequence++) == g) kept.push_back(p);
+                                }
+                                return kept.empty() ? Status::Ok() : fn(kept);
+                              });
+                            },
+                            true};
+      OUTCORE_RETURN_IF_ERROR(recurse(g, filtered));
+    }
+    return Status::Ok();
+  }
+
   // Spill buffers share an eighth of the budget, 64 KiB .. 1 MiB each.
   const uint64_t buffer_bytes =
       std::clamp<uint64_t>(options_.memory_mb * kMiB / 8 / group_count, 64 * 1024, kMiB) / sizeof(PackedTriangle) *
       sizeof(PackedTriangle);
   std::vector<BufferedFileWriter> writers(group_count);
   std::vector<std::string> paths(group_count);
-  std::vector<uint64_t> counts(group_count, 0);
-  std::vector<Aabb> centroid_bounds(group_count);
+  std::vector<uint64_t> written(group_count, 0);
   const uint32_t serial = spill_serial_++;
   for (uint32_t g = 0; g < group_count; ++g) {
     paths[g] = temp_.path() + "/spill-" + std::to_string(serial) + "-" + std::to_string(g) + ".bin";
@@ -279,12 +314,11 @@ Status ScenePacker::distribute(const PackedStream& stream, uint64_t count, uint3
   {
     ProgressBar bar("distribute", count, "tris", options_.show_progress);
     uint64_t sequence = 0;
-    OUTCORE_RETURN_IF_ERROR(stream([&](std::span<const PackedTriangle> batch) -> Status {
+    OUTCORE_RETURN_IF_ERROR(source.stream([&](std::span<const PackedTriangle> batch) -> Status {
       for (const PackedTriangle& p : batch) {
         const uint32_t g = group_of(p, sequence++);
         if (g >= group_count) return internal_error("triangle outside every group");
-        ++counts[g];
-        centroid_bounds[g].extend(p.tri.centroid());
+        ++written[g];
         OUTCORE_RETURN_IF_ERROR(writers[g].append(&p, sizeof p));
       }
       bar.advance(batch.size());
@@ -293,25 +327,23 @@ Status ScenePacker::distribute(const PackedStream& stream, uint64_t count, uint3
     bar.finish();
   }
   for (uint32_t g = 0; g < group_count; ++g) {
+    if (written[g] != plan.group_counts[g]) return internal_error("spill counts disagree with the group plan");
     spill_bytes_ += writers[g].size();
     OUTCORE_RETURN_IF_ERROR(writers[g].close(false));
   }
   writers.clear();
   for (uint32_t g = 0; g < group_count; ++g) {
-    if (counts[g] > 0) {
+    if (plan.group_counts[g] > 0) {
       const std::string path = paths[g];
-      PackedStream spill = [path](const PackedBatchFn& fn) {
-        return read_file_chunks(path, sizeof(PackedTriangle), kReadChunkBytes, [&](const char* data, std::size_t bytes) {
-          return fn(std::span<const PackedTriangle>(reinterpret_cast<const PackedTriangle*>(data),
-                                                    bytes / sizeof(PackedTriangle)));
-        });
-      };
-      // A group that did not shrink cannot be helped by a finer grid.
-      if (counts[g] == count) {
-        OUTCORE_RETURN_IF_ERROR(pack_sequential_chunks(spill, counts[g], depth + 1));
-      } else {
-        OUTCORE_RETURN_IF_ERROR(pack_stream(spill, counts[g], centroid_bounds[g], depth + 1));
-      }
+      SourceStream spill{[path](const PackedBatchFn& fn) {
+                           return read_file_chunks(
+                               path, sizeof(PackedTriangle), kReadChunkBytes, [&](const char* data, std::size_t bytes) {
+                                 return fn(std::span<const PackedTriangle>(reinterpret_cast<const PackedTriangle*>(data),
+                                                                           bytes / sizeof(PackedTriangle)));
+                               });
+                         },
+                         false};
+      OUTCORE_RETURN_IF_ERROR(recurse(g, spill));
     }
     std::error_code ec;
     fs::remove(paths[g], ec);
@@ -319,32 +351,39 @@ Status ScenePacker::distribute(const PackedStream& stream, uint64_t count, uint3
   return Status::Ok();
 }
 
-Status ScenePacker::pack_sequential_chunks(const PackedStream& stream, uint64_t count, uint32_t depth) {
+Status ScenePacker::pack_sequential_chunks(const SourceStream& source, uint64_t count, uint32_t depth) {
   const uint64_t chunk = group_capacity_;
-  const auto groups = static_cast<uint32_t>((count + chunk - 1) / chunk);
+  GroupPlan plan;
+  plan.group_count = static_cast<uint32_t>((count + chunk - 1) / chunk);
+  for (uint32_t g = 0; g < plan.group_count; ++g) {
+    plan.group_counts.push_back(std::min(chunk, count - g * chunk));
+    plan.group_centroid_bounds.emplace_back();  // unused: chunks fit in memory
+  }
   levels_ = std::max(levels_, depth + 1);
-  return distribute(stream, count, groups, [chunk](const PackedTriangle&, uint64_t seq) {
+  return distribute(source, count, plan, [chunk](const PackedTriangle&, uint64_t seq) {
     return static_cast<uint32_t>(seq / chunk);
   }, depth);
 }
 
-Status ScenePacker::pack_stream(const PackedStream& stream, uint64_t count, const Aabb& centroid_bounds,
+Status ScenePacker::pack_stream(const SourceStream& source, uint64_t count, const Aabb& centroid_bounds,
                                 uint32_t depth) {
-  if (count <= group_capacity_) return build_group_in_memory(stream, count);
+  if (count <= group_capacity_) return build_group_in_memory(source.stream, count);
   levels_ = std::max(levels_, depth + 1);
   if (depth >= kMaxRecursionDepth || centroid_bounds.extent() == Vec3f(0, 0, 0)) {
-    return pack_sequential_chunks(stream, count, depth);
+    return pack_sequential_chunks(source, count, depth);
   }
   const CentroidGrid grid(centroid_bounds, kGridCells);
   std::vector<CellStats> cells(grid.cell_count());
   {
     ProgressBar bar("histogram", count, "tris", options_.show_progress);
-    OUTCORE_RETURN_IF_ERROR(stream([&](std::span<const PackedTriangle> batch) -> Status {
+    OUTCORE_RETURN_IF_ERROR(source.stream([&](std::span<const PackedTriangle> batch) -> Status {
       OUTCORE_RETURN_IF_ERROR(check_cancel());
       for (const PackedTriangle& p : batch) {
-        CellStats& cell = cells[grid.cell_of(p.tri.centroid())];
+        const Vec3f c = p.tri.centroid();
+        CellStats& cell = cells[grid.cell_of(c)];
         ++cell.count;
         cell.bounds.extend(p.tri.bounds());
+        cell.centroid_bounds.extend(c);
       }
       bar.advance(batch.size());
       return Status::Ok();
@@ -356,7 +395,7 @@ Status ScenePacker::pack_stream(const PackedStream& stream, uint64_t count, cons
   const uint64_t max_group = std::max<uint64_t>(group_capacity_, (count + kMaxGroupsPerLevel - 1) / kMaxGroupsPerLevel * 2);
   const GroupPlan plan = plan_groups(grid, cells, max_group);
   cells = {};
-  return distribute(stream, count, plan.group_count, [&](const PackedTriangle& p, uint64_t) {
+  return distribute(source, count, plan, [&](const PackedTriangle& p, uint64_t) {
     return plan.cell_to_group[grid.cell_of(p.tri.centroid())];
   }, depth);
 }
@@ -367,7 +406,7 @@ Expected<PackSummary> ScenePacker::run() {
   OUTCORE_RETURN_IF_ERROR(open_sources());
   OUTCORE_RETURN_IF_ERROR(scan());
 
-  const uint64_t reserved = kGridCells * sizeof(CellStats) + kGridCells * sizeof(uint32_t) + kBrickBufferBytes +
+  const uint64_t reserved = kGridCells * (sizeof(CellStats) + sizeof(uint32_t)) + 2 * kBrickBufferBytes +
                             kStagingBytes + options_.memory_mb * kMiB / 8 + 2 * kReadChunkBytes + 4 * kMiB;
   const uint64_t budget = options_.memory_mb * kMiB;
   group_capacity_ = budget > reserved ? (budget - reserved) / sizeof(PackedTriangle) : 0;
@@ -382,11 +421,13 @@ Expected<PackSummary> ScenePacker::run() {
   const fs::path output_path = fs::absolute(options_.output, ec);
   fs::create_directories(output_path.parent_path(), ec);
   OUTCORE_RETURN_IF_ERROR(temp_.create_beside(output_path.string()));
-  OUTCORE_RETURN_IF_ERROR(brick_file_.create(temp_.path() + "/" + kBrickDataFileName, kBrickBufferBytes));
+  OUTCORE_RETURN_IF_ERROR(brick_file_.create(temp_.path() + "/" + kBrickDataFileName, kBrickBufferBytes, /*asynchronous=*/true));
   staging_.resize(kStagingBytes);
 
   brick_progress_ = std::make_unique<ProgressBar>("bricks", scan_.triangles, "tris", options_.show_progress);
-  OUTCORE_RETURN_IF_ERROR(pack_stream(input_stream(), scan_.triangles, scan_.centroid_bounds, 0));
+  bool all_cheap = true;
+  for (const auto& source : sources_) all_cheap &= source->cheap_to_restream();
+  OUTCORE_RETURN_IF_ERROR(pack_stream({input_stream(), all_cheap}, scan_.triangles, scan_.centroid_bounds, 0));
   brick_progress_->finish();
   OUTCORE_RETURN_IF_ERROR(brick_file_.close(options_.sync));
   OUTCORE_RETURN_IF_ERROR(check_cancel());

@@ -23,20 +23,65 @@ Status write_fully(int fd, const char* data, std::size_t bytes, const std::strin
 }  // namespace
 
 BufferedFileWriter::~BufferedFileWriter() {
+  if (writer_thread_.joinable()) {
+    {
+      std::lock_guard lock(mutex_);
+      stopping_ = true;
+    }
+    cv_.notify_all();
+    writer_thread_.join();
+  }
   if (fd_ >= 0) ::close(fd_);
 }
 
-Status BufferedFileWriter::create(const std::string& path, std::size_t buffer_bytes) {
+Status BufferedFileWriter::create(const std::string& path, std::size_t buffer_bytes, bool asynchronous) {
   path_ = path;
   fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
   if (fd_ < 0) return io_error_from_errno("cannot create " + path);
   capacity_ = buffer_bytes;
   buffer_.reserve(buffer_bytes);
   written_ = 0;
+  if (asynchronous) {
+    in_flight_.reserve(buffer_bytes);
+    writer_thread_ = std::thread([this] { background_loop(); });
+  }
   return Status::Ok();
 }
 
+void BufferedFileWriter::background_loop() {
+  std::unique_lock lock(mutex_);
+  while (true) {
+    cv_.wait(lock, [&] { return has_work_ || stopping_; });
+    if (!has_work_) return;
+    lock.unlock();
+    Status status = write_fully(fd_, in_flight_.data(), in_flight_.size(), path_);
+    lock.lock();
+    if (background_status_.ok()) background_status_ = status;
+    has_work_ = false;
+    cv_.notify_all();
+  }
+}
+
+Status BufferedFileWriter::wait_for_background_write() {
+  if (!writer_thread_.joinable()) return Status::Ok();
+  std::unique_lock lock(mutex_);
+  cv_.wait(lock, [&] { return !has_work_; });
+  return background_status_;
+}
+
 Status BufferedFileWriter::flush_buffer() {
+  if (writer_thread_.joinable()) {
+    OUTCORE_RETURN_IF_ERROR(wait_for_background_write());
+    written_ += buffer_.size();
+    {
+      std::lock_guard lock(mutex_);
+      in_flight_.swap(buffer_);
+      has_work_ = !in_flight_.empty();
+    }
+    cv_.notify_all();
+    buffer_.clear();
+    return Status::Ok();
+  }
   OUTCORE_RETURN_IF_ERROR(write_fully(fd_, buffer_.data(), buffer_.size(), path_));
   written_ += buffer_.size();
   buffer_.clear();
@@ -48,6 +93,7 @@ Status BufferedFileWriter::append(const void* data, std::size_t bytes) {
   if (buffer_.size() + bytes > capacity_) {
     OUTCORE_RETURN_IF_ERROR(flush_buffer());
     if (bytes >= capacity_) {
+      OUTCORE_RETURN_IF_ERROR(wait_for_background_write());
       OUTCORE_RETURN_IF_ERROR(write_fully(fd_, src, bytes, path_));
       written_ += bytes;
       return Status::Ok();
@@ -73,6 +119,7 @@ Status BufferedFileWriter::pad_to(uint64_t alignment) {
 Status BufferedFileWriter::close(bool sync) {
   if (fd_ < 0) return Status::Ok();
   Status status = flush_buffer();
+  if (status.ok()) status = wait_for_background_write();
   if (status.ok() && sync && ::fsync(fd_) != 0) status = io_error_from_errno("cannot sync " + path_);
   if (::close(fd_) != 0 && status.ok()) status = io_error_from_errno("cannot close " + path_);
   fd_ = -1;

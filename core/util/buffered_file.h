@@ -3,13 +3,17 @@
 // memory. Writes go through write(2) (not mmap) so the page cache, not this
 // process, holds what was written.
 //
-// Thread-safety: a writer is used by one thread at a time.
+// Thread-safety: a writer is used by one thread at a time (an asynchronous
+// writer owns one background thread of its own).
 #pragma once
 
+#include <condition_variable>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/util/status.h"
@@ -24,7 +28,9 @@ class BufferedFileWriter {
   BufferedFileWriter& operator=(const BufferedFileWriter&) = delete;
 
   // Creates a new file (fails if it exists) with a buffer of buffer_bytes.
-  Status create(const std::string& path, std::size_t buffer_bytes);
+  // With asynchronous, a second buffer is filled while a background thread
+  // writes the first, so the kernel's copy overlaps the caller's work.
+  Status create(const std::string& path, std::size_t buffer_bytes, bool asynchronous = false);
   Status append(const void* data, std::size_t bytes);
   // Appends zero bytes up to the next multiple of alignment.
   Status pad_to(uint64_t alignment);
@@ -36,12 +42,23 @@ class BufferedFileWriter {
 
  private:
   Status flush_buffer();
+  Status wait_for_background_write();
+  void background_loop();
 
   std::string path_;
   int fd_ = -1;
   std::vector<char> buffer_;
   std::size_t capacity_ = 0;
   uint64_t written_ = 0;
+
+  // Asynchronous mode: in_flight_ is being written by writer_thread_.
+  std::thread writer_thread_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::vector<char> in_flight_;
+  bool has_work_ = false;
+  bool stopping_ = false;
+  Status background_status_;
 };
 
 // Reads path sequentially in chunks of at most chunk_bytes (a multiple of

@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Configures and builds Outcore. Usage: scripts/build.sh [release|asan]
+# release -> build/, asan -> build-asan/ (AddressSanitizer + UBSan, Debug).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+kind=${1:-release}
+jobs=$(nproc)
+case "$kind" in
+  release) dir=build; flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DOUTCORE_WERROR=ON) ;;
+  asan) dir=build-asan; flags=(-DCMAKE_BUILD_TYPE=Debug -DOUTCORE_SANITIZE=ON -DOUTCORE_WERROR=ON) ;;
+  *) echo "usage: $0 [release|asan]" >&2; exit 2 ;;
+esac
+cmake -S . -B "$dir" -G Ninja "${flags[@]}" >/dev/null
+ninja -C "$dir" -j "$jobs"

@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# The README's test command: installs what is missing, builds, and runs every
+# test — the unit and integration suite (ctest) on the optimised build, then the
+# same suite once more under AddressSanitizer + UndefinedBehaviorSanitizer.
+# Set OUTCORE_SKIP_ASAN=1 to skip the sanitizer pass locally.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install.sh
+start=$(date +%s)
+
+echo "== build (release)"
+bash scripts/build.sh release
+echo "== tests (release)"
+ctest --test-dir build --output-on-failure -j "$(nproc)" --timeout 900
+
+if [ "${OUTCORE_SKIP_ASAN:-0}" != 1 ]; then
+  echo "== build (asan+ubsan)"
+  bash scripts/build.sh asan
+  echo "== tests (asan+ubsan)"
+  ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+    ctest --test-dir build-asan --output-on-failure -j "$(nproc)" --timeout 1800
+fi
+echo "== all tests passed in $(( $(date +%s) - start )) s"
