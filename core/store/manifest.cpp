@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/store/store_format.h"
+#include "core/upper/upper_traversal.h"
 #include "core/util/checksum.h"
 
 namespace outcore {
@@ -126,6 +127,9 @@ Status validate_manifest(const Manifest& manifest, const std::string& path) {
         return bad("upper hierarchy node " + std::to_string(i) + " does not contain its children");
       }
     }
+  }
+  if (manifest.upper.depth() > kMaxUpperDepth) {
+    return bad("upper hierarchy is deeper than " + std::to_string(kMaxUpperDepth) + " levels");
   }
   return Status::Ok();
 }

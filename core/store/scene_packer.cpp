@@ -30,12 +30,30 @@ namespace {
 namespace fs = std::filesystem;
 
 constexpr uint64_t kMiB = 1024 * 1024;
-// Memory the packer sets aside for everything but the in-memory triangle group:
-// the centroid grid (kGridCells x 36 B), spill and brick write buffers, batches.
-constexpr uint32_t kGridCells = 1u << 18;
-constexpr uint64_t kBrickBufferBytes = 4 * kMiB;  // two of them: the brick file writes asynchronously
-constexpr uint64_t kStagingBytes = 1 * kMiB;
-constexpr uint64_t kReadChunkBytes = 4 * kMiB;
+// How the memory bound is shared: fixed-size helpers scale with the budget so
+// that small budgets still leave most of it for the in-memory triangle group.
+struct MemoryPlan {
+  uint32_t grid_cells;        // centroid grid: 1/16 of the budget, 4 K .. 256 K cells
+  uint64_t brick_buffer;      // two of them: the brick file writes asynchronously
+  uint64_t staging;           // brick payload staging
+  uint64_t read_chunk;        // spill reads
+  uint64_t spill_buffers;     // shared by all spill writers of one level
+  uint64_t batches = 4 * kMiB;  // source and packed batches, filters
+  uint64_t reserved() const {
+    return uint64_t{grid_cells} * (sizeof(CellStats) + sizeof(uint32_t)) + 2 * brick_buffer + staging +
+           2 * read_chunk + spill_buffers + batches;
+  }
+  static MemoryPlan for_budget(uint64_t budget) {
+    MemoryPlan plan{};
+    plan.grid_cells =
+        static_cast<uint32_t>(std::clamp<uint64_t>(budget / 16 / (sizeof(CellStats) + sizeof(uint32_t)), 1u << 12, 1u << 18));
+    plan.brick_buffer = std::clamp<uint64_t>(budget / 64, 256 * 1024, 4 * kMiB);
+    plan.staging = std::clamp<uint64_t>(budget / 128, 64 * 1024, kMiB);
+    plan.read_chunk = std::clamp<uint64_t>(budget / 64, 256 * 1024, 4 * kMiB);
+    plan.spill_buffers = budget / 16;
+    return plan;
+  }
+};
 constexpr uint32_t kMaxGroupsPerLevel = 256;
 constexpr uint32_t kMaxRecursionDepth = 16;
 
@@ -101,6 +119,7 @@ class ScenePacker {
   const PackOptions& options_;
   std::vector<std::unique_ptr<TriangleSource>> sources_;
   ScanResult scan_;
+  MemoryPlan memory_{};
   uint64_t group_capacity_ = 0;  // triangles that fit in memory at once
   TemporaryDirectory temp_;
   BufferedFileWriter brick_file_;
@@ -299,9 +318,9 @@ Status ScenePacker::distribute(const SourceStream& source, uint64_t count, const
     return Status::Ok();
   }
 
-  // Spill buffers share an eighth of the budget, 64 KiB .. 1 MiB each.
+  // Spill buffers share a sixteenth of the budget, 64 KiB .. 1 MiB each.
   const uint64_t buffer_bytes =
-      std::clamp<uint64_t>(options_.memory_mb * kMiB / 8 / group_count, 64 * 1024, kMiB) / sizeof(PackedTriangle) *
+      std::clamp<uint64_t>(memory_.spill_buffers / group_count, 64 * 1024, kMiB) / sizeof(PackedTriangle) *
       sizeof(PackedTriangle);
   std::vector<BufferedFileWriter> writers(group_count);
   std::vector<std::string> paths(group_count);
@@ -335,9 +354,9 @@ Status ScenePacker::distribute(const SourceStream& source, uint64_t count, const
   for (uint32_t g = 0; g < group_count; ++g) {
     if (plan.group_counts[g] > 0) {
       const std::string path = paths[g];
-      SourceStream spill{[path](const PackedBatchFn& fn) {
+      SourceStream spill{[path, chunk = memory_.read_chunk](const PackedBatchFn& fn) {
                            return read_file_chunks(
-                               path, sizeof(PackedTriangle), kReadChunkBytes, [&](const char* data, std::size_t bytes) {
+                               path, sizeof(PackedTriangle), chunk, [&](const char* data, std::size_t bytes) {
                                  return fn(std::span<const PackedTriangle>(reinterpret_cast<const PackedTriangle*>(data),
                                                                            bytes / sizeof(PackedTriangle)));
                                });
@@ -372,7 +391,7 @@ Status ScenePacker::pack_stream(const SourceStream& source, uint64_t count, cons
   if (depth >= kMaxRecursionDepth || centroid_bounds.extent() == Vec3f(0, 0, 0)) {
     return pack_sequential_chunks(source, count, depth);
   }
-  const CentroidGrid grid(centroid_bounds, kGridCells);
+  const CentroidGrid grid(centroid_bounds, memory_.grid_cells);
   std::vector<CellStats> cells(grid.cell_count());
   {
     ProgressBar bar("histogram", count, "tris", options_.show_progress);
@@ -406,10 +425,11 @@ Expected<PackSummary> ScenePacker::run() {
   OUTCORE_RETURN_IF_ERROR(open_sources());
   OUTCORE_RETURN_IF_ERROR(scan());
 
-  const uint64_t reserved = kGridCells * (sizeof(CellStats) + sizeof(uint32_t)) + 2 * kBrickBufferBytes +
-                            kStagingBytes + options_.memory_mb * kMiB / 8 + 2 * kReadChunkBytes + 4 * kMiB;
   const uint64_t budget = options_.memory_mb * kMiB;
+  memory_ = MemoryPlan::for_budget(budget);
+  const uint64_t reserved = memory_.reserved();
   group_capacity_ = budget > reserved ? (budget - reserved) / sizeof(PackedTriangle) : 0;
+  if (options_.max_group_triangles > 0) group_capacity_ = std::min(group_capacity_, options_.max_group_triangles);
   group_capacity_ = std::max<uint64_t>(group_capacity_, options_.brick_triangles);
   if (group_capacity_ < options_.brick_triangles ||
       static_cast<uint64_t>(options_.brick_triangles) * sizeof(PackedTriangle) + reserved > budget) {
@@ -421,8 +441,8 @@ Expected<PackSummary> ScenePacker::run() {
   const fs::path output_path = fs::absolute(options_.output, ec);
   fs::create_directories(output_path.parent_path(), ec);
   OUTCORE_RETURN_IF_ERROR(temp_.create_beside(output_path.string()));
-  OUTCORE_RETURN_IF_ERROR(brick_file_.create(temp_.path() + "/" + kBrickDataFileName, kBrickBufferBytes, /*asynchronous=*/true));
-  staging_.resize(kStagingBytes);
+  OUTCORE_RETURN_IF_ERROR(brick_file_.create(temp_.path() + "/" + kBrickDataFileName, memory_.brick_buffer, /*asynchronous=*/true));
+  staging_.resize(memory_.staging);
 
   brick_progress_ = std::make_unique<ProgressBar>("bricks", scan_.triangles, "tris", options_.show_progress);
   bool all_cheap = true;

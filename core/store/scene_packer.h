@@ -36,6 +36,9 @@ struct PackOptions {
   bool sync = true;
   // Progress bars on stderr.
   bool show_progress = false;
+  // Cap on the triangles partitioned in memory at once; 0 derives it from
+  // memory_mb. Lower values force the out-of-core path (tests, tuning).
+  uint64_t max_group_triangles = 0;
 };
 
 struct PackSummary {

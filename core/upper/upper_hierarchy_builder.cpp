@@ -31,7 +31,13 @@ struct SweepBuilder {
     double best_cost = std::numeric_limits<double>::infinity();
     int best_axis = -1;
     size_t best_split = begin + count / 2;
-    for (int axis = 0; axis < 3; ++axis) {
+    // Coinciding centroids give every split the same cost, and the sweep would
+    // peel off one brick per level (a chain as deep as the brick count, built in
+    // quadratic time); they are split in the middle, in brick id order, instead.
+    Aabb centroids;
+    for (size_t i = begin; i < end; ++i) centroids.extend(bounds[order[i]].center());
+    const bool centroids_coincide = centroids.extent() == Vec3f(0, 0, 0);
+    for (int axis = 0; axis < 3 && !centroids_coincide; ++axis) {
       // Ties broken by brick id so the tree is deterministic.
       std::sort(order.begin() + begin, order.begin() + end, [&](uint32_t a, uint32_t b) {
         const float ca = centroid(a, axis), cb = centroid(b, axis);
@@ -55,6 +61,7 @@ struct SweepBuilder {
         }
       }
     }
+    if (best_axis < 0) best_axis = 0;
     std::sort(order.begin() + begin, order.begin() + end, [&](uint32_t a, uint32_t b) {
       const float ca = centroid(a, best_axis), cb = centroid(b, best_axis);
       return ca < cb || (ca == cb && a < b);

@@ -1,0 +1,115 @@
+// Traversal of the fixed upper hierarchy: finds, for one ray, the next bricks
+// it reaches in front-to-back order, keyed by (entry distance, brick id). The
+// engine keeps only a small window of upcoming bricks per ray and asks again
+// when the window runs out, so memory per ray stays fixed however many bricks a
+// ray crosses. The traversal knows nothing of caches or queues: it reports
+// bricks, the scheduler decides what to do with them (as in madmann91/bvh,
+// where traversal takes the leaf work as a callback).
+//
+// Robustness: slab tests are conservative (Ize 2013): the exit distance is
+// scaled up and the entry distance down by 1 +/- 2*gamma(3), and a slab whose
+// product is NaN (origin on a slab plane with a zero direction component)
+// constrains nothing, so no box test loses a hit the triangle test would find.
+//
+// Thread-safety: pure functions over an immutable hierarchy.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "core/query/ray_types.h"
+#include "core/upper/upper_hierarchy.h"
+
+namespace outcore {
+
+// Deepest upper hierarchy the fixed traversal stack supports; the manifest
+// validation refuses deeper ones.
+inline constexpr uint32_t kMaxUpperDepth = 128;
+
+struct BrickKey {
+  float entry = -std::numeric_limits<float>::infinity();
+  uint32_t brick = 0;
+  bool operator<(const BrickKey& o) const { return entry < o.entry || (entry == o.entry && brick < o.brick); }
+  bool operator==(const BrickKey&) const = default;
+};
+
+// What the slab test needs of a ray, computed once per ray.
+struct SlabRay {
+  Vec3f origin;
+  Vec3f inverse_direction;
+
+  explicit SlabRay(const Ray& ray)
+      : origin(ray.origin),
+        inverse_direction(1.0f / ray.direction.x, 1.0f / ray.direction.y, 1.0f / ray.direction.z) {}
+};
+
+namespace detail {
+// 2*gamma(3) with gamma(n) = n*eps/(1-n*eps), eps = 2^-24.
+inline constexpr float kSlabWiden = 2.0f * (3.0f * 5.9604645e-8f) / (1.0f - 3.0f * 5.9604645e-8f);
+
+// max/min that treat a NaN second argument as "no constraint".
+inline float max_keep(float a, float b) { return b > a ? b : a; }
+inline float min_keep(float a, float b) { return b < a ? b : a; }
+
+// Conservative [entry, exit] of the ray against the box, clipped to [tmin, tmax];
+// true when the segment touches the box and the exit is at least min_exit.
+inline bool slab_test(const SlabRay& ray, const Aabb& box, float tmin, float tmax, float min_exit, float& entry) {
+  float lo = tmin, hi = tmax;
+  for (int axis = 0; axis < 3; ++axis) {
+    const float t0 = (box.lo[axis] - ray.origin[axis]) * ray.inverse_direction[axis];
+    const float t1 = (box.hi[axis] - ray.origin[axis]) * ray.inverse_direction[axis];
+    const float near = t0 < t1 ? t0 : t1;
+    const float far = t0 < t1 ? t1 : t0;
+    // near/far are NaN only when both products are (0 * inf); then the slab
+    // cannot exclude anything.
+    lo = max_keep(lo, near * (near > 0 ? 1.0f - kSlabWiden : 1.0f + kSlabWiden));
+    hi = min_keep(hi, far * (far > 0 ? 1.0f + kSlabWiden : 1.0f - kSlabWiden));
+  }
+  entry = lo;
+  return lo <= hi && hi >= min_exit;
+}
+}  // namespace detail
+
+// Fills `window` (sorted ascending) with the up to N smallest keys strictly
+// greater than `after` among the bricks whose box the ray's segment
+// [tmin, tmax] touches; returns how many were found. Counts visited nodes.
+template <std::size_t N>
+uint32_t next_bricks(const UpperHierarchy& upper, const SlabRay& ray, float tmin, float tmax, const BrickKey& after,
+                     std::array<BrickKey, N>& window, uint64_t& nodes_visited) {
+  uint32_t found = 0;
+  if (upper.nodes.empty()) return 0;
+  std::array<uint32_t, kMaxUpperDepth + 1> stack;
+  uint32_t top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const uint32_t index = stack[--top];
+    const UpperNode& node = upper.nodes[index];
+    ++nodes_visited;
+    // Once the window is full, only keys below its largest can enter.
+    const float limit = found == N ? std::min(tmax, window[N - 1].entry) : tmax;
+    float entry;
+    // Boxes the ray has left before `after` hold no key greater than it.
+    if (!detail::slab_test(ray, node.bounds, tmin, limit, after.entry, entry)) continue;
+    if (!node.is_leaf) {
+      stack[top++] = node.child_or_brick;
+      stack[top++] = node.child_or_brick + 1;
+      continue;
+    }
+    const BrickKey key{entry, node.child_or_brick};
+    if (!(after < key)) continue;
+    if (found == N && !(key < window[N - 1])) continue;
+    // Insertion into the small sorted window.
+    uint32_t pos = found < N ? found++ : N - 1;
+    while (pos > 0 && key < window[pos - 1]) {
+      window[pos] = window[pos - 1];
+      --pos;
+    }
+    window[pos] = key;
+  }
+  return found;
+}
+
+}  // namespace outcore

@@ -1,0 +1,386 @@
+// End-to-end tests of `outcore pack` and `outcore info`, run as the real binary:
+// bad input is reported with its file and line (or parameter) and leaves
+// nothing behind, an interrupted pack cleans up, and packing stays inside its
+// memory bound.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/store/scene_packer.h"
+#include "core/store/scene_store.h"
+#include "core/util/checksum.h"
+#include "tests/support/subprocess.h"
+#include "tests/support/test_paths.h"
+
+namespace outcore {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::outcore_binary;
+using testing::run_subprocess;
+using testing::SubprocessOptions;
+using testing::SubprocessResult;
+using testing::TempDir;
+using testing::write_text_file;
+
+constexpr uint64_t kMiB = 1024 * 1024;
+// What a pack process holds besides the packer's own data (bounded by
+// --mem-mb): the process image, shared libraries (TBB, Embree, the C++
+// runtime), TBB worker stacks and allocator slack.
+constexpr uint64_t kPackFixedOverheadMiB = 32;
+
+SubprocessResult outcore(std::vector<std::string> args,
+                         std::chrono::milliseconds timeout = std::chrono::milliseconds(300'000)) {
+  args.insert(args.begin(), outcore_binary());
+  SubprocessOptions options;
+  options.timeout = timeout;
+  return run_subprocess(args, options);
+}
+
+bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+// Everything in `dir` (the parent of the would-be store).
+std::vector<std::string> entries(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) names.push_back(entry.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// A failing pack: non-zero exit, stderr mentions every one of `mentions`, and
+// neither the store nor a temporary directory beside it exists.
+void expect_pack_fails(const std::vector<std::string>& inputs, const std::vector<std::string>& extra_args,
+                       const std::vector<std::string>& mentions) {
+  TempDir out;
+  const std::string store = out.file("scene");
+  std::vector<std::string> args{"pack"};
+  args.insert(args.end(), inputs.begin(), inputs.end());
+  args.insert(args.end(), {"-o", store, "-q", "--no-sync"});
+  args.insert(args.end(), extra_args.begin(), extra_args.end());
+  const SubprocessResult r = outcore(args);
+  ASSERT_TRUE(r.started) << r.error;
+  EXPECT_NE(r.exit_code, 0) << r.describe();
+  EXPECT_EQ(r.term_signal, 0) << r.describe();
+  for (const std::string& m : mentions)
+    EXPECT_TRUE(contains(r.stderr_text, m)) << "no '" << m << "' in:\n" << r.stderr_text;
+  EXPECT_TRUE(entries(out.path()).empty()) << "left behind: " << entries(out.path()).front();
+}
+
+// ---- the subprocess helper itself -------------------------------------------------
+
+TEST(Subprocess, CapturesStdoutStderrAndExitCode) {
+  const auto r = run_subprocess({"/bin/sh", "-c", "echo to-out; echo to-err >&2; exit 3"});
+  ASSERT_TRUE(r.started) << r.error;
+  EXPECT_EQ(r.exit_code, 3);
+  EXPECT_EQ(r.term_signal, 0);
+  EXPECT_EQ(r.stdout_text, "to-out\n");
+  EXPECT_EQ(r.stderr_text, "to-err\n");
+}
+
+TEST(Subprocess, TimeoutKillsTheCommand) {
+  SubprocessOptions options;
+  options.timeout = std::chrono::milliseconds(100);
+  const auto r = run_subprocess({"/bin/sleep", "30"}, options);
+  ASSERT_TRUE(r.started) << r.error;
+  EXPECT_TRUE(r.timed_out);
+  EXPECT_EQ(r.term_signal, SIGKILL);
+  EXPECT_LT(r.seconds, 10.0);
+}
+
+TEST(Subprocess, MissingProgramFailsWithExit127) {
+  const auto r = run_subprocess({"/nonexistent/program"});
+  EXPECT_EQ(r.exit_code, 127);
+  EXPECT_TRUE(contains(r.stderr_text, "/nonexistent/program")) << r.stderr_text;
+}
+
+// The command's peak RSS must not include the test process's own memory, which
+// a plain fork() would copy into the child before execv.
+TEST(Subprocess, PeakRssExcludesTheTestProcessMemory) {
+  std::vector<char> ballast(256 * kMiB);
+  std::memset(ballast.data(), 1, ballast.size());
+  const auto r = run_subprocess({"/bin/sh", "-c", "exit 0"});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_GT(r.peak_rss_bytes, 0u);
+  EXPECT_LT(r.peak_rss_bytes, 32 * kMiB);
+  EXPECT_EQ(ballast[ballast.size() / 2], 1);
+}
+
+// ---- bad input --------------------------------------------------------------------
+
+TEST(PackCliBadInput, MissingFileFailsNamingTheFile) {
+  TempDir in;
+  const std::string missing = in.file("nowhere.obj");
+  expect_pack_fails({"gen:sphere?level=1", missing}, {}, {missing});
+}
+
+TEST(PackCliBadInput, GarbledObjLineFailsWithFileAndLine) {
+  TempDir in;
+  const std::string obj = in.file("garbled.obj");
+  write_text_file(obj, "# a comment\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 zero\nf 1 2 3\n");
+  expect_pack_fails({obj}, {}, {obj + ":5", "zero"});
+}
+
+TEST(PackCliBadInput, DirectoryNamedLikeAnObjFailsNamingIt) {
+  TempDir in;
+  const std::string obj = in.file("folder.obj");
+  fs::create_directory(obj);
+  expect_pack_fails({"gen:sphere?level=1", obj}, {}, {obj});
+}
+
+TEST(PackCliBadInput, ObjFaceIndexOutOfRangeFailsWithFileAndLine) {
+  TempDir in;
+  const std::string obj = in.file("range.obj");
+  write_text_file(obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n");
+  expect_pack_fails({obj}, {}, {obj + ":5", "4"});
+}
+
+TEST(PackCliBadInput, PlyVertexIndexOutOfRangeFailsNamingFileAndIndex) {
+  TempDir in;
+  const std::string ply = in.file("range.ply");
+  write_text_file(
+      ply,
+      "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+      "element face 2\nproperty list uchar int vertex_indices\nend_header\n"
+      "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 1 7\n");
+  expect_pack_fails({ply}, {}, {ply + ":14", "7"});
+}
+
+TEST(PackCliBadInput, FaceWithFewerThanThreeCornersFailsWithFileAndLine) {
+  TempDir in;
+  const std::string obj = in.file("short.obj");
+  write_text_file(obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n");
+  expect_pack_fails({obj}, {}, {obj + ":5", "corner"});
+}
+
+TEST(PackCliBadInput, NanCoordinateFailsWithFileAndLine) {
+  TempDir in;
+  const std::string obj = in.file("nan.obj");
+  write_text_file(obj, "v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n");
+  expect_pack_fails({obj}, {}, {obj + ":2"});
+}
+
+TEST(PackCliBadInput, CoordinateOverflowingFloatFailsWithFileAndLine) {
+  TempDir in;
+  const std::string obj = in.file("huge.obj");
+  write_text_file(obj, "v 0 0 0\nv 1 0 0\nv 0 1e39 0\nf 1 2 3\n");
+  expect_pack_fails({obj}, {}, {obj + ":3"});
+}
+
+TEST(PackCliBadInput, SceneWithoutTrianglesFailsAsEmpty) {
+  TempDir in;
+  const std::string obj = in.file("points.obj");
+  write_text_file(obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
+  expect_pack_fails({obj}, {}, {"empty"});
+}
+
+TEST(PackCliBadInput, UnknownGeneratorFailsNamingIt) {
+  expect_pack_fails({"gen:sphere?level=1", "gen:dodecahedron"}, {}, {"dodecahedron"});
+}
+
+TEST(PackCliBadInput, UnknownGeneratorParameterFailsNamingIt) {
+  expect_pack_fails({"gen:sphere?levle=2"}, {}, {"levle"});
+}
+
+TEST(PackCliBadInput, OutOfRangeGeneratorParameterFailsNamingIt) {
+  expect_pack_fails({"gen:terrain?n=0"}, {}, {"'n'"});
+}
+
+TEST(PackCliBadInput, UnsupportedExtensionFails) {
+  TempDir in;
+  const std::string stl = in.file("model.stl");
+  write_text_file(stl, "solid x\nendsolid x\n");
+  expect_pack_fails({stl}, {}, {stl, "unsupported"});
+}
+
+TEST(PackCliBadInput, ZeroBrickTrianglesFailsNamingTheOption) {
+  expect_pack_fails({"gen:sphere?level=1"}, {"--brick-tris", "0"}, {"--brick-tris"});
+}
+
+TEST(PackCliBadInput, TooSmallMemoryBudgetFailsNamingTheOption) {
+  expect_pack_fails({"gen:sphere?level=1"}, {"--mem-mb", "16"}, {"--mem-mb"});
+}
+
+TEST(PackCliBadInput, ExistingOutputWithoutForceFailsAndSaysSo) {
+  TempDir out;
+  const std::string store = out.file("scene");
+  ASSERT_TRUE(outcore({"pack", "gen:sphere?level=1", "-o", store, "-q", "--no-sync"}).succeeded());
+  const auto r = outcore({"pack", "gen:torus", "-o", store, "-q", "--no-sync"});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_TRUE(contains(r.stderr_text, "--force")) << r.stderr_text;
+  auto opened = SceneStore::open(store);
+  ASSERT_TRUE(opened.ok());
+  EXPECT_EQ((*opened)->manifest().inputs[0].spec, "gen:sphere?level=1");
+  const auto forced = outcore({"pack", "gen:torus", "-o", store, "-q", "--no-sync", "--force"});
+  EXPECT_TRUE(forced.succeeded()) << forced.describe();
+  opened = SceneStore::open(store);
+  ASSERT_TRUE(opened.ok());
+  EXPECT_EQ((*opened)->manifest().inputs[0].spec, "gen:torus");
+  EXPECT_EQ(entries(out.path()), std::vector<std::string>{"scene"});
+}
+
+// ---- info ---------------------------------------------------------------------------
+
+class InfoCliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto r = outcore(
+        {"pack", "gen:sphere?level=2", "gen:torus", "-o", store_, "-q", "--no-sync", "--brick-tris", "100"});
+    ASSERT_TRUE(r.succeeded()) << r.describe();
+    auto opened = SceneStore::open(store_);
+    ASSERT_TRUE(opened.ok());
+    bricks_ = (*opened)->brick_count();
+  }
+  TempDir dir_;
+  std::string store_ = dir_.file("scene");
+  uint32_t bricks_ = 0;
+};
+
+TEST_F(InfoCliTest, PrintsTheTriangleCount) {
+  const auto r = outcore({"info", store_});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_TRUE(contains(r.stdout_text, "4416")) << r.stdout_text;  // 320 + 4096
+  EXPECT_TRUE(contains(r.stdout_text, std::to_string(bricks_))) << r.stdout_text;
+}
+
+TEST_F(InfoCliTest, JsonHasTheSceneTriangleAndBrickCounts) {
+  const auto r = outcore({"info", store_, "--json"});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  const std::string& json = r.stdout_text;
+  ASSERT_FALSE(json.empty());
+  EXPECT_EQ(json.front(), '{');
+  // The scene's keys follow the inputs array; the inputs have their own counts.
+  const size_t after_inputs = json.find(']');
+  ASSERT_NE(after_inputs, std::string::npos) << json;
+  const std::string scene = json.substr(after_inputs);
+  EXPECT_TRUE(contains(scene, "\"triangles\":4416")) << json;
+  EXPECT_TRUE(contains(scene, "\"bricks\":" + std::to_string(bricks_) + ",")) << json;
+  EXPECT_TRUE(contains(json, "\"triangles\":320")) << json;
+  EXPECT_TRUE(contains(json, "\"triangles\":4096")) << json;
+}
+
+TEST(InfoCli, MissingStoreFailsNamingThePath) {
+  TempDir dir;
+  const auto r = outcore({"info", dir.file("absent")});
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_TRUE(contains(r.stderr_text, dir.file("absent"))) << r.stderr_text;
+}
+
+// ---- interruption -------------------------------------------------------------------
+
+// About 20M triangles: far more than the pack can finish in the time allowed.
+const std::string kHugeCity = "gen:city?of=(gen:sphere?level=5)&copies=977";
+
+void expect_interrupted_cleanly(const SubprocessResult& r, const TempDir& out) {
+  ASSERT_TRUE(r.started) << r.error;
+  EXPECT_TRUE(r.interrupted);
+  EXPECT_FALSE(r.timed_out) << "SIGINT did not stop the pack";
+  EXPECT_NE(r.exit_code, 0) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "interrupted")) << r.stderr_text;
+  EXPECT_TRUE(entries(out.path()).empty()) << "left behind: " << entries(out.path()).front();
+}
+
+TEST(PackCliInterrupt, SigintAfter300MsExitsNonZeroAndLeavesNothing) {
+  TempDir out;
+  SubprocessOptions options;
+  options.interrupt_after = std::chrono::milliseconds(300);
+  options.timeout = std::chrono::milliseconds(60'000);
+  const auto r = run_subprocess(
+      {outcore_binary(), "pack", kHugeCity, "-o", out.file("scene"), "--mem-mb", "64", "-q", "--no-sync"},
+      options);
+  expect_interrupted_cleanly(r, out);
+}
+
+// SIGINT once the temporary store exists beside the output, so the cleanup of
+// half-written data is what is being tested.
+TEST(PackCliInterrupt, SigintWhileWritingRemovesThePartialDirectory) {
+  TempDir out;
+  SubprocessOptions options;
+  options.interrupt_when = [&] {
+    for (const auto& entry : fs::directory_iterator(out.path())) {
+      if (contains(entry.path().filename().string(), ".partial-")) return true;
+    }
+    return false;
+  };
+  options.timeout = std::chrono::milliseconds(60'000);
+  const auto r = run_subprocess({outcore_binary(), "pack", "gen:city?of=(gen:sphere?level=5)&copies=150",
+                                 "-o", out.file("scene"), "--mem-mb", "64", "-q", "--no-sync"},
+                                options);
+  ASSERT_TRUE(r.interrupted) << "the pack ended before its temporary directory was seen: " << r.describe();
+  expect_interrupted_cleanly(r, out);
+}
+
+// ---- memory bound -------------------------------------------------------------------
+
+// 64-bit XXH3 of every triangle, indexed by primitive id (one input), plus
+// checks that every id occurs exactly once.
+std::vector<uint64_t> triangle_fingerprints(const std::string& store_dir, uint64_t expected) {
+  auto opened = SceneStore::open(store_dir);
+  EXPECT_TRUE(opened.ok()) << opened.status().to_string();
+  if (!opened.ok()) return {};
+  const SceneStore& store = **opened;
+  EXPECT_EQ(store.manifest().triangle_count, expected);
+  std::vector<uint64_t> hashes(expected, 0);
+  std::vector<uint8_t> seen(expected, 0);
+  uint64_t bad_ids = 0;
+  BrickData brick;
+  for (uint32_t b = 0; b < store.brick_count(); ++b) {
+    const Status s = store.load_brick(b, brick);
+    EXPECT_TRUE(s.ok()) << s.to_string();
+    if (!s.ok()) return {};
+    for (size_t i = 0; i < brick.ids.size(); ++i) {
+      const TriangleId id = brick.ids[i];
+      if (id.geometry_id != 0 || id.primitive_id >= expected || seen[id.primitive_id]++) {
+        ++bad_ids;
+        continue;
+      }
+      hashes[id.primitive_id] = checksum64(&brick.triangles[i], sizeof(Triangle));
+    }
+  }
+  EXPECT_EQ(bad_ids, 0u) << "unknown or repeated ids";
+  EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), static_cast<long>(expected)) << "ids missing";
+  return hashes;
+}
+
+TEST(PackCliMemory, PeakRssStaysWithinMemMbPlusFixedOverheadAndResultMatchesAnInMemoryPack) {
+  // 293 copies of a 20480-triangle sphere: 6.0M triangles, 252 MiB raw, about
+  // four times the 64 MiB budget.
+  const std::string city = "gen:city?of=(gen:sphere?level=5)&copies=293";
+  const uint64_t triangles = 293ull * 20480;
+  const uint64_t mem_mb = 64;
+  TempDir out;
+  const auto small =
+      outcore({"pack", city, "-o", out.file("small"), "--mem-mb", std::to_string(mem_mb), "-q", "--no-sync"});
+  ASSERT_TRUE(small.succeeded()) << small.describe();
+  EXPECT_GE(triangles * sizeof(PackedTriangle), 3 * mem_mb * kMiB);
+  EXPECT_GT(small.peak_rss_bytes, 0u);
+  EXPECT_LE(small.peak_rss_bytes, (mem_mb + kPackFixedOverheadMiB) * kMiB)
+      << "peak RSS " << small.peak_rss_bytes / kMiB << " MiB";
+  std::printf("pack of %llu triangles at --mem-mb %llu: peak RSS %.1f MiB\n",
+              static_cast<unsigned long long>(triangles), static_cast<unsigned long long>(mem_mb),
+              static_cast<double>(small.peak_rss_bytes) / kMiB);
+  EXPECT_FALSE(contains(small.stdout_text, "out-of-core levels 0")) << small.stdout_text;
+
+  const auto large = outcore({"pack", city, "-o", out.file("large"), "--mem-mb", "1024", "-q", "--no-sync"});
+  ASSERT_TRUE(large.succeeded()) << large.describe();
+  EXPECT_TRUE(contains(large.stdout_text, "out-of-core levels 0")) << large.stdout_text;
+
+  const std::vector<uint64_t> a = triangle_fingerprints(out.file("small"), triangles);
+  const std::vector<uint64_t> b = triangle_fingerprints(out.file("large"), triangles);
+  ASSERT_EQ(a.size(), triangles);
+  ASSERT_EQ(b.size(), triangles);
+  size_t differing = 0;
+  for (size_t i = 0; i < a.size(); ++i) differing += a[i] != b[i];
+  EXPECT_EQ(differing, 0u) << "triangles stored differently by the out-of-core and in-memory packs";
+}
+
+}  // namespace
+}  // namespace outcore
