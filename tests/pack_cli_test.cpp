@@ -362,8 +362,10 @@ TEST(PackCliMemory, PeakRssStaysWithinMemMbPlusFixedOverheadAndResultMatchesAnIn
   ASSERT_TRUE(small.succeeded()) << small.describe();
   EXPECT_GE(triangles * sizeof(PackedTriangle), 3 * mem_mb * kMiB);
   EXPECT_GT(small.peak_rss_bytes, 0u);
+#ifndef OUTCORE_SANITIZE_BUILD  // sanitizer shadow memory and quarantine dwarf the bound
   EXPECT_LE(small.peak_rss_bytes, (mem_mb + kPackFixedOverheadMiB) * kMiB)
       << "peak RSS " << small.peak_rss_bytes / kMiB << " MiB";
+#endif
   std::printf("pack of %llu triangles at --mem-mb %llu: peak RSS %.1f MiB\n",
               static_cast<unsigned long long>(triangles), static_cast<unsigned long long>(mem_mb),
               static_cast<double>(small.peak_rss_bytes) / kMiB);

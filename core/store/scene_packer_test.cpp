@@ -302,11 +302,11 @@ TEST(ScenePackerRoundTrip, SingleBrickSceneHasASingleLeafUpperHierarchy) {
 // ---- out of core ----------------------------------------------------------------
 
 // The smallest budget PackOptions documents, with the in-memory group capped
-// at 50 k triangles so that scenes of a few MiB must go out of core.
+// at 150 k triangles so that scenes of a few MiB must go out of core.
 constexpr uint64_t kSmallMemoryMb = 32;
 class ScenePackerOutOfCore : public ::testing::Test {
  protected:
-  void SetUp() override { g_max_group_triangles = 50'000; }
+  void SetUp() override { g_max_group_triangles = 150'000; }
   void TearDown() override { g_max_group_triangles = 0; }
 };
 
@@ -341,25 +341,25 @@ std::string obj_with_repeated_triangle(size_t copies, bool with_outlier) {
 }
 
 TEST_F(ScenePackerOutOfCore, IdenticalCentroidsBeyondMemoryBudgetAreChunkedAndRoundTrip) {
-  // 150k copies of one triangle: 6.3 MiB, more than one in-memory group at 32 MiB,
+  // 400k copies of one triangle: 17 MiB, more than one in-memory group at 32 MiB,
   // and no grid can separate them.
   TempDir inputs;
   const std::string obj = inputs.file("same.obj");
-  write_text_file(obj, obj_with_repeated_triangle(150'000, false));
+  write_text_file(obj, obj_with_repeated_triangle(400'000, false));
   PackSummary summary;
   pack_and_check({obj}, 1000, kSmallMemoryMb, &summary);
   EXPECT_GE(summary.out_of_core_levels, 1u);
-  EXPECT_EQ(summary.triangles, 150'000u);
+  EXPECT_EQ(summary.triangles, 400'000u);
 }
 
 TEST_F(ScenePackerOutOfCore, IdenticalCentroidsPlusOneOutlierBeyondMemoryBudgetRoundTrip) {
   TempDir inputs;
   const std::string obj = inputs.file("same.obj");
-  write_text_file(obj, obj_with_repeated_triangle(150'000, true));
+  write_text_file(obj, obj_with_repeated_triangle(400'000, true));
   PackSummary summary;
   pack_and_check({obj}, 1000, kSmallMemoryMb, &summary);
   EXPECT_GE(summary.out_of_core_levels, 1u);
-  EXPECT_EQ(summary.triangles, 150'001u);
+  EXPECT_EQ(summary.triangles, 400'001u);
 }
 
 // ---- ids ------------------------------------------------------------------------
