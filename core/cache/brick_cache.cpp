@@ -1,0 +1,274 @@
+#include "core/cache/brick_cache.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <cstdio>
+#include <exception>
+#include <new>
+#include <string>
+#include <utility>
+
+namespace outcore {
+namespace {
+
+// "1.25 MiB (1310720 bytes)": MiB for people, bytes for small test budgets.
+std::string describe_bytes(uint64_t bytes) {
+  char mib[64];
+  std::snprintf(mib, sizeof(mib), "%.2f MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
+  return std::string(mib) + " (" + std::to_string(bytes) + " bytes)";
+}
+
+// Loads brick `id` (checksum verified) and builds it. Every failure, including
+// an exception from the builder, comes back as a Status naming the brick, so
+// the caller can always undo its reservation.
+Expected<std::unique_ptr<BrickAccel>> load_and_build(const SceneStore& store, const BrickBuilder& builder,
+                                                     uint32_t id) {
+  const std::string brick = "brick " + std::to_string(id);
+  try {
+    BrickData data;
+    OUTCORE_RETURN_IF_ERROR(store.load_brick(id, data));  // names the brick
+    Expected<std::unique_ptr<BrickAccel>> built = builder.build(std::move(data));
+    if (!built.ok())
+      return built.status().with_context("building " + brick + " with '" + builder.name() + "'");
+    if (*built == nullptr)
+      return internal_error("builder '" + builder.name() + "' returned nothing for " + brick);
+    return built;
+  } catch (const std::bad_alloc&) {
+    return resource_exhausted("out of memory while loading or building " + brick);
+  } catch (const std::exception& e) {
+    return internal_error("loading or building " + brick + " threw: " + e.what());
+  }
+}
+
+}  // namespace
+
+PinnedBrick& PinnedBrick::operator=(PinnedBrick&& other) noexcept {
+  if (this != &other) {
+    release();
+    cache_ = std::exchange(other.cache_, nullptr);
+    accel_ = std::exchange(other.accel_, nullptr);
+    brick_ = std::exchange(other.brick_, 0);
+    was_hit_ = std::exchange(other.was_hit_, false);
+  }
+  return *this;
+}
+
+void PinnedBrick::release() {
+  if (cache_ == nullptr) return;
+  BrickCache* cache = std::exchange(cache_, nullptr);
+  accel_ = nullptr;
+  cache->unpin(brick_);
+}
+
+BrickCache::BrickCache(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickBuilder> builder,
+                       std::unique_ptr<EvictionPolicy> policy, uint64_t budget_bytes)
+    : store_(std::move(store)),
+      builder_(std::move(builder)),
+      policy_(std::move(policy)),
+      budget_bytes_(budget_bytes),
+      entries_(store_ ? store_->brick_count() : 0) {
+  assert(store_ && builder_ && policy_);
+}
+
+BrickCache::~BrickCache() {
+#ifndef NDEBUG
+  for (const Entry& entry : entries_) {
+    assert(entry.pins == 0 && "a PinnedBrick outlived its BrickCache");
+    assert(entry.state != State::kBuilding);
+  }
+#endif
+}
+
+Status BrickCache::too_large(uint32_t brick_id, uint64_t reservation) const {
+  return resource_exhausted("brick " + std::to_string(brick_id) + " needs up to " +
+                            describe_bytes(reservation) + " to build, more than the cache budget of " +
+                            describe_bytes(budget_bytes_) +
+                            "; raise the budget or repack with smaller bricks");
+}
+
+Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
+  if (brick_id >= entries_.size()) {
+    // The same code and words as SceneStore::load_brick for the same mistake.
+    return out_of_range("brick " + std::to_string(brick_id) + " does not exist (the scene has " +
+                        std::to_string(entries_.size()) + " bricks)");
+  }
+  const uint32_t triangles = store_->manifest().bricks[brick_id].triangle_count;
+  // entries_ is never resized, so this reference stays valid across unlocks.
+  Entry& entry = entries_[brick_id];
+
+  std::unique_lock lock(mutex_);
+  bool waited = false;
+  while (entry.state != State::kAbsent) {
+    if (entry.state == State::kReady) {
+      ++entry.pins;
+      policy_->on_access(brick_id);
+      ++(waited ? counters_.misses : counters_.hits);
+      PinnedBrick pin;
+      pin.cache_ = this;
+      pin.accel_ = entry.accel.get();
+      pin.brick_ = brick_id;
+      pin.was_hit_ = !waited;
+      return pin;
+    }
+    // Building (single flight): wait for that build. If it fails, the brick is
+    // absent again and this thread retries the build itself below.
+    waited = true;
+    changed_.wait(lock);
+  }
+
+  // Absent: this thread builds it. Other acquirers of the brick wait from here
+  // on, including while this thread waits for room.
+  const uint64_t reservation = builder_->reserve_bytes(triangles);
+  if (reservation > budget_bytes_) return too_large(brick_id, reservation);
+  entry.state = State::kBuilding;
+  if (!make_room(reservation, lock)) {
+    entry.state = State::kAbsent;
+    lock.unlock();
+    changed_.notify_all();
+    return too_large(brick_id, reservation);
+  }
+  entry.bytes = reservation;
+  account(static_cast<int64_t>(reservation));
+  lock.unlock();
+
+  // Load and build outside the lock.
+  const auto start = std::chrono::steady_clock::now();
+  Expected<std::unique_ptr<BrickAccel>> built = load_and_build(*store_, *builder_, brick_id);
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+
+  if (!built.ok()) {
+    lock.lock();
+    account(-static_cast<int64_t>(reservation));
+    entry.bytes = 0;
+    entry.state = State::kAbsent;
+    lock.unlock();
+    changed_.notify_all();
+    return built.status();
+  }
+
+  std::unique_ptr<BrickAccel> accel = std::move(built).value();
+  const uint64_t bytes = accel->memory_bytes();
+  lock.lock();
+  bool overran = false;
+  if (bytes > reservation) {
+    // A builder bug: its bound was too small. Keep the accounting honest (true
+    // bytes), making room for the excess without waiting; if that is not
+    // enough, accounted bytes exceed the budget and the counter says so.
+    overran = true;
+    ++counters_.reservation_overruns;
+    std::vector<std::unique_ptr<BrickAccel>> victims;
+    const uint64_t freed = evict_unpinned(bytes - reservation, victims);
+    if (!victims.empty()) release_victims(victims, freed, lock);
+  }
+  account(static_cast<int64_t>(bytes) - static_cast<int64_t>(reservation));
+  entry.bytes = bytes;
+  entry.accel = std::move(accel);
+  entry.state = State::kReady;
+  entry.pins = 1;
+  policy_->on_insert(brick_id, bytes);
+  ++counters_.builds;
+  ++counters_.misses;
+  ++counters_.resident_bricks;
+  counters_.bytes_built += bytes;
+  counters_.build_seconds += seconds;
+  PinnedBrick pin;
+  pin.cache_ = this;
+  pin.accel_ = entry.accel.get();
+  pin.brick_ = brick_id;
+  pin.was_hit_ = false;
+  const uint64_t resident = counters_.resident_bytes;
+  lock.unlock();
+  changed_.notify_all();
+
+  if (overran) {
+    spdlog::warn(
+        "brick cache: builder '{}' built brick {} ({} triangles) into {} bytes, more than its "
+        "reservation of {} bytes; {} bytes now accounted against a budget of {} bytes",
+        builder_->name(), brick_id, triangles, bytes, reservation, resident, budget_bytes_);
+  }
+  return pin;
+}
+
+bool BrickCache::make_room(uint64_t bytes, std::unique_lock<std::mutex>& lock) {
+  if (bytes > budget_bytes_) return false;
+  for (;;) {
+    std::vector<std::unique_ptr<BrickAccel>> victims;
+    const uint64_t freed = evict_unpinned(bytes, victims);
+    if (!victims.empty()) {
+      // The lock is dropped while they are destroyed: look again afterwards.
+      release_victims(victims, freed, lock);
+      continue;
+    }
+    if (counters_.resident_bytes + bytes <= budget_bytes_) return true;
+    // Everything still accounted is pinned, building, or being destroyed by
+    // another thread; each of those notifies when it changes. As bytes <= the
+    // budget, resident_bytes > 0 here, so there is something to wait for.
+    assert(counters_.resident_bytes > 0);
+    changed_.wait(lock);
+  }
+}
+
+uint64_t BrickCache::evict_unpinned(uint64_t bytes, std::vector<std::unique_ptr<BrickAccel>>& victims) {
+  const auto evictable = [this](uint32_t brick) {
+    return brick < entries_.size() && entries_[brick].state == State::kReady && entries_[brick].pins == 0;
+  };
+  uint64_t freed = 0;
+  while (counters_.resident_bytes - freed + bytes > budget_bytes_) {
+    const std::optional<uint32_t> victim = policy_->choose_victim(evictable);
+    if (!victim) break;
+    if (!evictable(*victim)) {
+      assert(false && "eviction policy chose a brick that is not evictable");
+      break;
+    }
+    Entry& entry = entries_[*victim];
+    policy_->on_erase(*victim);
+    freed += entry.bytes;
+    entry.bytes = 0;
+    entry.state = State::kAbsent;
+    victims.push_back(std::move(entry.accel));
+    ++counters_.evictions;
+    --counters_.resident_bricks;
+  }
+  return freed;
+}
+
+void BrickCache::release_victims(std::vector<std::unique_ptr<BrickAccel>>& victims, uint64_t bytes,
+                                 std::unique_lock<std::mutex>& lock) {
+  lock.unlock();
+  victims.clear();
+  lock.lock();
+  account(-static_cast<int64_t>(bytes));
+  changed_.notify_all();
+}
+
+void BrickCache::unpin(uint32_t brick_id) {
+  {
+    std::lock_guard lock(mutex_);
+    Entry& entry = entries_[brick_id];
+    assert(entry.pins > 0);
+    if (--entry.pins != 0) return;
+  }
+  // Now evictable: a thread waiting for room may proceed.
+  changed_.notify_all();
+}
+
+void BrickCache::account(int64_t delta) {
+  assert(delta >= 0 || counters_.resident_bytes >= static_cast<uint64_t>(-delta));
+  counters_.resident_bytes = static_cast<uint64_t>(static_cast<int64_t>(counters_.resident_bytes) + delta);
+  counters_.peak_resident_bytes = std::max(counters_.peak_resident_bytes, counters_.resident_bytes);
+}
+
+bool BrickCache::is_resident(uint32_t brick_id) const {
+  std::lock_guard lock(mutex_);
+  return brick_id < entries_.size() && entries_[brick_id].state == State::kReady;
+}
+
+CacheCounters BrickCache::counters() const {
+  std::lock_guard lock(mutex_);
+  return counters_;
+}
+
+}  // namespace outcore

@@ -1,0 +1,134 @@
+// BrickCache: built bricks (BrickAccel) held under a hard byte budget.
+//
+// - Lazy and single-flight: the first acquire() of a brick loads it from the
+//   store (checksum verified) and builds it; concurrent acquirers of the same
+//   brick wait for that one build (state absent -> building -> ready).
+// - Pinning: acquire() returns a PinnedBrick; a pinned brick is never evicted.
+//   Release pins promptly: a caller holding a pin must not wait on the cache.
+// - Budget: before building, the cache reserves the builder's upper bound
+//   (BrickBuilder::reserve_bytes), evicting unpinned bricks by policy to make
+//   room, waiting for unpins if everything else is pinned; after the build the
+//   reservation shrinks to the brick's true bytes. Accounted bytes therefore
+//   never exceed the budget. A brick whose bound exceeds the whole budget is
+//   RESOURCE_EXHAUSTED naming it. Evicted bricks stay accounted until they are
+//   destroyed (outside the lock), so accounted bytes bound the cache's memory.
+// - Errors: a failed load or build (DATA_LOSS from a corrupted brick, a builder
+//   error) releases the reservation and leaves the brick absent; the cache
+//   stays usable. Acquirers that were waiting for that build wake and retry it
+//   themselves, so each gets its own outcome (a corrupted brick fails for every
+//   one of them; a transient error may succeed on retry). A brick id beyond the
+//   store is OUT_OF_RANGE (as in SceneStore::load_brick).
+// - Counters: hits + misses counts successful acquisitions; failed ones are in
+//   neither. builds, bytes_built and build_seconds count successful builds.
+//
+// Thread-safety: all member functions may be called from any thread. One mutex
+// guards the table; it is taken per brick acquisition, never per ray, and is
+// not held while loading or building.
+#pragma once
+
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <vector>
+
+#include "core/accel/brick_accel_factory.h"
+#include "core/cache/eviction_policy.h"
+#include "core/store/scene_store.h"
+
+namespace outcore {
+
+struct CacheCounters {
+  uint64_t hits = 0;    // acquisitions of a ready brick
+  uint64_t misses = 0;  // acquisitions that built (or waited for a build)
+  uint64_t builds = 0;  // brick builds performed
+  uint64_t evictions = 0;
+  uint64_t bytes_built = 0;
+  double build_seconds = 0;  // load + build, summed over builds
+  uint64_t resident_bytes = 0;
+  uint64_t peak_resident_bytes = 0;  // accounted (reservations included)
+  uint32_t resident_bricks = 0;
+  // Builds whose true bytes exceeded BrickBuilder::reserve_bytes (a builder
+  // bug; each is logged). Only these can push accounted bytes past the budget.
+  uint64_t reservation_overruns = 0;
+};
+
+class BrickCache;
+
+// A pin on a ready brick; unpins on destruction. Must not outlive its cache.
+class PinnedBrick {
+ public:
+  PinnedBrick() = default;
+  PinnedBrick(PinnedBrick&& other) noexcept { *this = std::move(other); }
+  PinnedBrick& operator=(PinnedBrick&& other) noexcept;
+  ~PinnedBrick() { release(); }
+  PinnedBrick(const PinnedBrick&) = delete;
+  PinnedBrick& operator=(const PinnedBrick&) = delete;
+
+  const BrickAccel& accel() const { return *accel_; }
+  uint32_t brick_id() const { return brick_; }
+  // True when this acquisition found the brick ready (no build, no wait).
+  bool was_hit() const { return was_hit_; }
+  void release();
+
+ private:
+  friend class BrickCache;
+  BrickCache* cache_ = nullptr;
+  const BrickAccel* accel_ = nullptr;
+  uint32_t brick_ = 0;
+  bool was_hit_ = false;
+};
+
+class BrickCache {
+ public:
+  BrickCache(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickBuilder> builder,
+             std::unique_ptr<EvictionPolicy> policy, uint64_t budget_bytes);
+  ~BrickCache();
+  BrickCache(const BrickCache&) = delete;
+  BrickCache& operator=(const BrickCache&) = delete;
+
+  Expected<PinnedBrick> acquire(uint32_t brick_id);
+  bool is_resident(uint32_t brick_id) const;
+  CacheCounters counters() const;
+  uint64_t budget_bytes() const { return budget_bytes_; }
+  const BrickBuilder& builder() const { return *builder_; }
+  const EvictionPolicy& policy() const { return *policy_; }
+
+ private:
+  friend class PinnedBrick;
+  enum class State : uint8_t { kAbsent, kBuilding, kReady };
+  struct Entry {
+    State state = State::kAbsent;
+    uint32_t pins = 0;
+    uint64_t bytes = 0;  // accounted (a reservation while building)
+    std::unique_ptr<BrickAccel> accel;
+  };
+
+  void unpin(uint32_t brick_id);
+  // Evicts unpinned ready bricks until `bytes` more fit, waiting for unpins and
+  // builds when everything left is pinned or building; false if it cannot
+  // (`bytes` is more than the whole budget).
+  bool make_room(uint64_t bytes, std::unique_lock<std::mutex>& lock);
+  // Moves unpinned ready bricks chosen by the policy into `victims` until
+  // `bytes` more would fit once they are gone, or none is left; returns their
+  // bytes, which stay accounted until release_victims().
+  uint64_t evict_unpinned(uint64_t bytes, std::vector<std::unique_ptr<BrickAccel>>& victims);
+  // Destroys `victims` outside the lock (an Embree scene's destructor takes
+  // Embree's own mutex), then stops accounting their `bytes` and notifies.
+  void release_victims(std::vector<std::unique_ptr<BrickAccel>>& victims, uint64_t bytes,
+                       std::unique_lock<std::mutex>& lock);
+  void account(int64_t delta);
+  Status too_large(uint32_t brick_id, uint64_t reservation) const;
+
+  std::shared_ptr<const SceneStore> store_;
+  std::unique_ptr<BrickBuilder> builder_;
+  std::unique_ptr<EvictionPolicy> policy_;
+  const uint64_t budget_bytes_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable changed_;
+  std::vector<Entry> entries_;
+  CacheCounters counters_;
+};
+
+}  // namespace outcore
