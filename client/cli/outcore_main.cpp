@@ -1,5 +1,5 @@
 // The `outcore` command: one binary whose subcommands are implemented in the
-// component they belong to (core: pack, info; later server: serve; client: query).
+// component they belong to (core: pack, info, trace; later server: serve; client: query).
 #include <CLI/CLI.hpp>
 
 #include "core/cli/commands.h"
@@ -11,6 +11,7 @@ int main(int argc, char** argv) {
   int exit_code = 1;
   outcore::add_pack_command(app, exit_code);
   outcore::add_info_command(app, exit_code);
+  outcore::add_trace_command(app, exit_code);
   CLI11_PARSE(app, argc, argv);
   return exit_code;
 }

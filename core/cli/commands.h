@@ -15,6 +15,7 @@ namespace outcore {
 
 void add_pack_command(CLI::App& app, int& exit_code);
 void add_info_command(CLI::App& app, int& exit_code);
+void add_trace_command(CLI::App& app, int& exit_code);
 
 // Prints "outcore <command>: error: <message>" on stderr and returns 1.
 int report_command_error(const char* command, const std::string& message);

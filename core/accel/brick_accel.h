@@ -1,0 +1,36 @@
+// BrickAccel: one brick's built acceleration structure (a "subtree" in the
+// design card), as held by the cache. The engine calls it once per brick with
+// all the rays queued there, so the virtual call is per brick, never per ray;
+// each implementation runs its own tight, non-virtual loop over the rays.
+//
+// Thread-safety: after construction an accel is immutable; intersect() and
+// occluded() may run concurrently from many threads on disjoint ray subsets.
+#pragma once
+
+#include <cstdint>
+#include <span>
+
+#include "core/query/query_types.h"
+#include "core/query/ray_types.h"
+
+namespace outcore {
+
+class BrickAccel {
+ public:
+  virtual ~BrickAccel() = default;
+
+  // Closest hit: for each i in ray_ids, traces rays[i] over [tnear, min(tfar,
+  // hits[i].t)] and replaces hits[i] when hit_is_better() says so. Hit ids are
+  // the user's (geometry_id, primitive_id); ng is the unit geometric normal.
+  virtual void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const = 0;
+  // Any hit: sets occluded[i] = 1 for each ray that hits something in this brick.
+  virtual void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const = 0;
+
+  // Every byte this brick holds: geometry, index and id buffers, and the
+  // acceleration structure (Embree's own allocations, via its memory monitor).
+  virtual uint64_t memory_bytes() const = 0;
+  virtual double build_seconds() const = 0;
+  virtual uint32_t triangle_count() const = 0;
+};
+
+}  // namespace outcore

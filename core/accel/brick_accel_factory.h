@@ -1,0 +1,38 @@
+// Creates brick structures by name ("embree"; more come later) with options
+// given as key=value strings; unknown names and unknown or malformed options
+// are errors, never ignored. The returned BrickBuilder turns a loaded brick into
+// a BrickAccel.
+//
+// Thread-safety: a BrickBuilder may be called from several threads at once.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/accel/brick_accel.h"
+#include "core/store/brick_data.h"
+#include "core/util/status.h"
+
+namespace outcore {
+
+class BrickBuilder {
+ public:
+  virtual ~BrickBuilder() = default;
+  // Consumes the brick's data (the accel may keep its buffers).
+  virtual Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const = 0;
+  // An upper bound on memory_bytes() of the accel build() would return for
+  // a brick of this many triangles, including the transient peak during the
+  // build; the cache reserves it before building so it never overruns its budget.
+  virtual uint64_t reserve_bytes(uint32_t triangle_count) const = 0;
+  virtual const std::string& name() const = 0;
+};
+
+using BrickAccelOptions = std::map<std::string, std::string>;
+
+// Names: "embree" (options: robust=0|1, quality=low|medium|high).
+Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name, const BrickAccelOptions& options);
+std::vector<std::string> brick_accel_names();
+
+}  // namespace outcore

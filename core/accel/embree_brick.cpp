@@ -1,0 +1,350 @@
+#include "core/accel/embree_brick.h"
+
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <string>
+#include <utility>
+
+#include "core/accel/embree_device.h"
+
+namespace outcore {
+namespace {
+
+RTCBuildQuality rtc_quality(EmbreeQuality quality) {
+  switch (quality) {
+    case EmbreeQuality::kLow: return RTC_BUILD_QUALITY_LOW;
+    case EmbreeQuality::kMedium: return RTC_BUILD_QUALITY_MEDIUM;
+    case EmbreeQuality::kHigh: return RTC_BUILD_QUALITY_HIGH;
+  }
+  return RTC_BUILD_QUALITY_HIGH;
+}
+
+constexpr float kInfinity = std::numeric_limits<float>::infinity();
+constexpr uint32_t kNoPrim = 0xffffffffu;
+
+// A little beyond t (2^-18 relative, about 32 float ulps). Embree accepts a
+// candidate when T <= |den| * tfar on rescaled values and reports t = T *
+// rcp(|den|), so a triangle at exactly the best t (a duplicate of the best,
+// here or in another brick) can fail a tfar of exactly t; and a node that
+// holds it can be culled by an ulp. Tracing up to widen(t) lets every such
+// candidate reach the tie filter, which rejects whatever is beyond t.
+inline float widen(float t) {
+  constexpr float kMargin = 0x1p-18f;
+  return t + std::fabs(t) * kMargin;
+}
+
+inline uint64_t id_key(uint32_t geometry_id, uint32_t primitive_id) {
+  return (uint64_t{geometry_id} << 32) | primitive_id;
+}
+
+inline void fill_ray(const Ray& ray, float tfar, RTCRay& out) {
+  out.org_x = ray.origin.x;
+  out.org_y = ray.origin.y;
+  out.org_z = ray.origin.z;
+  out.tnear = ray.tnear;
+  out.dir_x = ray.direction.x;
+  out.dir_y = ray.direction.y;
+  out.dir_z = ray.direction.z;
+  out.time = 0.0f;
+  out.tfar = tfar;
+  out.mask = 0xffffffffu;
+  out.id = 0;
+  out.flags = 0;
+}
+
+Vec3f unit_normal(const Triangle& tri) {
+  const Vec3d v0(tri.v0), v1(tri.v1), v2(tri.v2);
+  const Vec3d n = cross(v1 - v0, v2 - v0);
+  const double len = length(n);
+  return Vec3f(n / len);  // len > 0: degenerate triangles are not in the scene
+}
+
+}  // namespace
+
+Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& brick,
+                                                                   const EmbreeBrickConfig& config) {
+  const auto start = std::chrono::steady_clock::now();
+  const uint64_t n = brick.triangles.size();
+  const std::string what = "building brick " + std::to_string(brick.brick_id) + " (embree)";
+  if (brick.ids.size() != n) {
+    return invalid_argument(what + ": " + std::to_string(n) + " triangles but " + std::to_string(brick.ids.size()) +
+                            " ids");
+  }
+  if (n > kMaxTriangles) {
+    return out_of_range(what + ": " + std::to_string(n) + " triangles, at most " + std::to_string(kMaxTriangles));
+  }
+  OUTCORE_ASSIGN_OR_RETURN(EmbreeDevice * device, EmbreeDevice::instance());
+
+  std::unique_ptr<EmbreeBrickAccel> accel(new EmbreeBrickAccel());
+  accel->config_ = config;
+  accel->brick_id_ = brick.brick_id;
+  uint64_t peak = brick.memory_bytes();
+
+  // Vertex buffer: the soup itself, with at least one spare triangle of slack
+  // for Embree's 16-byte load of the last vertex.
+  if (brick.triangles.capacity() > n) {
+    accel->triangles_ = std::move(brick.triangles);
+  } else {
+    accel->triangles_.reserve(n + 1);
+    accel->triangles_.assign(brick.triangles.begin(), brick.triangles.end());
+    peak = std::max(peak, brick.memory_bytes() + accel->triangles_.capacity() * sizeof(Triangle));
+  }
+  brick.triangles = {};
+  accel->ids_ = std::move(brick.ids);
+
+  // Index buffer over the non-degenerate triangles, again with slack.
+  uint64_t kept = 0;
+  for (const Triangle& tri : accel->triangles_) kept += tri.is_degenerate() ? 0 : 1;
+  accel->prim_is_triangle_ = kept == n;
+  accel->indices_.reserve(3 * kept + 1);
+  for (uint32_t k = 0; k < n; ++k) {
+    if (!accel->prim_is_triangle_ && accel->triangles_[k].is_degenerate()) continue;
+    accel->indices_.insert(accel->indices_.end(), {3 * k, 3 * k + 1, 3 * k + 2});
+  }
+  peak = std::max(peak, accel->buffer_bytes());
+  Aabb bounds;
+  for (const Triangle& tri : accel->triangles_) bounds.extend(tri.bounds());
+  const Vec3f extent = bounds.extent();
+  accel->max_extent_ = n > 0 ? std::max({extent.x, extent.y, extent.z}) : 0.0f;
+
+  if (kept > 0) {
+    EmbreeDevice::ExclusiveSection section(*device);
+    RTCScene scene = rtcNewScene(device->handle());
+    RTCGeometry geometry = scene != nullptr ? rtcNewGeometry(device->handle(), RTC_GEOMETRY_TYPE_TRIANGLE) : nullptr;
+    if (geometry != nullptr) {
+      rtcSetSceneFlags(scene, config.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+      rtcSetSceneBuildQuality(scene, rtc_quality(config.quality));
+      rtcSetGeometryBuildQuality(geometry, rtc_quality(config.quality));
+      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, accel->triangles_.data(), 0,
+                                 sizeof(Vec3f), 3 * n);
+      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, accel->indices_.data(), 0,
+                                 3 * sizeof(uint32_t), kept);
+      rtcSetGeometryUserData(geometry, accel.get());
+      rtcSetGeometryIntersectFilterFunction(geometry, &EmbreeBrickAccel::tie_filter);
+      rtcCommitGeometry(geometry);
+      rtcAttachGeometryByID(scene, geometry, 0);
+      rtcReleaseGeometry(geometry);
+      // Isolated: while this thread waits inside the commit it must not pick
+      // up an outer task (say, another brick's build) that would block on the
+      // allocation mutex this thread holds.
+      tbb::this_task_arena::isolate([&] { rtcCommitScene(scene); });
+    }
+    Status status = device->take_error(what);
+    if (status.ok() && (scene == nullptr || geometry == nullptr)) status = internal_error(what + ": Embree returned null");
+    if (!status.ok()) {
+      if (scene != nullptr) rtcReleaseScene(scene);
+      return status;
+    }
+    accel->scene_ = scene;
+    accel->embree_bytes_ = static_cast<uint64_t>(std::max<int64_t>(0, section.delta_bytes()));
+    peak = std::max(peak, accel->buffer_bytes() + static_cast<uint64_t>(section.peak_delta_bytes()));
+  }
+  accel->build_peak_bytes_ = peak + kUntrackedBytes;
+  accel->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return accel;
+}
+
+EmbreeBrickAccel::~EmbreeBrickAccel() {
+  if (scene_ == nullptr) return;
+  auto device = EmbreeDevice::instance();  // exists: it made scene_
+  EmbreeDevice::ExclusiveSection section(**device);
+  rtcReleaseScene(scene_);
+}
+
+uint64_t EmbreeBrickAccel::buffer_bytes() const {
+  return triangles_.capacity() * sizeof(Triangle) + ids_.capacity() * sizeof(TriangleId) +
+         indices_.capacity() * sizeof(uint32_t);
+}
+
+uint64_t EmbreeBrickAccel::memory_bytes() const { return buffer_bytes() + embree_bytes_ + kUntrackedBytes; }
+
+uint64_t EmbreeBrickAccel::reserve_bytes(uint64_t triangle_count, const EmbreeBrickConfig& config) {
+  (void)config;
+  // Placeholder until measured.
+  return 64 * 1024 + triangle_count * 512;
+}
+
+namespace {
+// TUNING (temporary): thresholds from the environment.
+float env_or(const char* name, float fallback) {
+  const char* v = std::getenv(name);
+  return v != nullptr ? std::strtof(v, nullptr) : fallback;
+}
+const float kDirSpread = env_or("OC_DIR_SPREAD", 0.1f);
+const float kOriginSpread = env_or("OC_ORIGIN_SPREAD", 0.1f);
+const int kMode = static_cast<int>(env_or("OC_MODE", 0));  // 0 adaptive, 1 always single, 2 always coherent
+}  // namespace
+
+// The best hit of one ray while it is traced through this brick: t, and who
+// holds it — an Embree primID of this brick, or (prim == kNoPrim) the hit the
+// ray brought from other bricks, by its user key.
+struct EmbreeBrickAccel::TieRecord {
+  float t;
+  uint32_t prim;
+  uint64_t key;
+};
+
+// Embree hands the filter this pointer as it was given to rtcIntersect*.
+struct EmbreeBrickAccel::TieContext {
+  RTCIntersectContext rtc;  // first member
+  TieRecord* records;       // indexed by RTCRay::id
+};
+
+uint64_t EmbreeBrickAccel::key_of(uint32_t prim) const {
+  const TriangleId id = ids_[triangle_of(prim)];
+  return id_key(id.geometry_id, id.primitive_id);
+}
+
+// Intersection filter: accepts a candidate only if it beats the ray's best by
+// hit_is_better()'s rule (nearer, or as near with a smaller user id), so that
+// ties are settled by the rule, not by traversal or brick order. On
+// acceptance the segment is kept open to widen(t), so that candidates at
+// exactly t elsewhere in the brick are still offered to this filter.
+void EmbreeBrickAccel::tie_filter(const RTCFilterFunctionNArguments* args) {
+  const auto* self = static_cast<const EmbreeBrickAccel*>(args->geometryUserPtr);
+  TieRecord* records = reinterpret_cast<const TieContext*>(args->context)->records;
+  const unsigned n = args->N;
+  for (unsigned lane = 0; lane < n; ++lane) {
+    if (args->valid[lane] != -1) continue;
+    float& tfar = RTCRayN_tfar(args->ray, n, lane);  // the candidate's t
+    const float t = tfar;
+    const uint32_t prim = RTCHitN_primID(args->hit, n, lane);
+    TieRecord& best = records[RTCRayN_id(args->ray, n, lane)];
+    bool better = t < best.t;
+    if (t == best.t) better = self->key_of(prim) < (best.prim != kNoPrim ? self->key_of(best.prim) : best.key);
+    if (!better) {
+      args->valid[lane] = 0;
+      continue;
+    }
+    best.t = t;
+    best.prim = prim;
+    tfar = widen(t);
+  }
+}
+
+void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
+  if (scene_ == nullptr) return;
+  constexpr std::size_t kChunk = 256;
+  TieRecord records[kChunk];
+  TieContext incoherent{{}, records};
+  rtcInitIntersectContext(&incoherent.rtc);  // RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
+  TieContext coherent{{}, records};
+  rtcInitIntersectContext(&coherent.rtc);
+  coherent.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  const float origin_limit = kOriginSpread * max_extent_;
+  RTCRayHit found[kChunk];
+  uint32_t found_ray[kChunk];
+  for (std::size_t begin = 0; begin < ray_ids.size(); begin += kChunk) {
+    const std::size_t end = std::min(ray_ids.size(), begin + kChunk);
+    std::size_t count = 0;
+    float dlo[3] = {2, 2, 2}, dhi[3] = {-2, -2, -2};
+    float olo[3] = {kInfinity, kInfinity, kInfinity}, ohi[3] = {-kInfinity, -kInfinity, -kInfinity};
+    uint32_t octant_or = 0, octant_and = 7;
+    for (std::size_t j = begin; j < end; ++j) {
+      const uint32_t i = ray_ids[j];
+      const Ray& ray = rays[i];
+      const Hit& best = hits[i];
+      const float tfar = std::min(ray.tfar, widen(best.t));
+      if (!(tfar > ray.tnear)) continue;  // nothing in (tnear, tfar] can improve it
+      records[count] = {best.t, kNoPrim, best.is_hit() ? id_key(best.geometry_id, best.primitive_id) : ~uint64_t{0}};
+      RTCRayHit& rayhit = found[count];
+      fill_ray(ray, tfar, rayhit.ray);
+      rayhit.ray.id = static_cast<uint32_t>(count);
+      rayhit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+      rayhit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+      found_ray[count++] = i;
+      const Vec3f& d = ray.direction;
+      const float inv = 1.0f / std::sqrt(dot(d, d));
+      const uint32_t octant = (d.x < 0 ? 1u : 0u) | (d.y < 0 ? 2u : 0u) | (d.z < 0 ? 4u : 0u);
+      octant_or |= octant;
+      octant_and &= octant;
+      for (int a = 0; a < 3; ++a) {
+        dlo[a] = std::min(dlo[a], d[a] * inv);
+        dhi[a] = std::max(dhi[a], d[a] * inv);
+        olo[a] = std::min(olo[a], ray.origin[a]);
+        ohi[a] = std::max(ohi[a], ray.origin[a]);
+      }
+    }
+    float dspread = 0, ospread = 0;
+    for (int a = 0; a < 3; ++a) {
+      dspread = std::max(dspread, dhi[a] - dlo[a]);
+      ospread = std::max(ospread, ohi[a] - olo[a]);
+    }
+    const bool is_coherent = kMode == 2 || (kMode == 0 && count >= 16 && octant_or == octant_and &&
+                                            dspread <= kDirSpread && ospread <= origin_limit);
+    if (is_coherent) {
+      rtcIntersect1M(scene_, &coherent.rtc, found, static_cast<unsigned>(count), sizeof(RTCRayHit));
+      write_hits(found, records, found_ray, 0, count, hits);
+      continue;
+    }
+    // Incoherent: one ray at a time; a hit's id and vertices (random accesses
+    // into arrays of megabytes) are prefetched as soon as it is found and read
+    // once a window of rays is traced, so those cache misses overlap with the
+    // next rays' traversal instead of stalling each ray.
+    constexpr std::size_t kWindow = 32;
+    for (std::size_t w = 0; w < count; w += kWindow) {
+      const std::size_t w_end = std::min(count, w + kWindow);
+      for (std::size_t c = w; c < w_end; ++c) {
+        rtcIntersect1(scene_, &incoherent.rtc, &found[c]);
+        const uint32_t prim = records[c].prim;
+        if (prim == kNoPrim) continue;
+        if (prim_is_triangle_) {
+          __builtin_prefetch(&ids_[prim]);
+          __builtin_prefetch(&triangles_[prim]);
+          __builtin_prefetch(reinterpret_cast<const char*>(&triangles_[prim]) + sizeof(Triangle) - 1);
+        } else {
+          __builtin_prefetch(&indices_[3 * prim]);
+        }
+      }
+      write_hits(found, records, found_ray, w, w_end, hits);
+    }
+  }
+}
+
+void EmbreeBrickAccel::write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
+                                  std::size_t begin, std::size_t end, Hit* hits) const {
+  for (std::size_t c = begin; c < end; ++c) {
+    const TieRecord& record = records[c];
+    if (record.prim == kNoPrim) continue;  // nothing here beats what the ray had
+    const uint32_t k = triangle_of(record.prim);
+    Hit& best = hits[found_ray[c]];
+    best.t = record.t;
+    best.geometry_id = ids_[k].geometry_id;
+    best.primitive_id = ids_[k].primitive_id;
+    best.u = found[c].hit.u;  // Embree keeps the last accepted candidate's: the record's
+    best.v = found[c].hit.v;
+    best.normal = unit_normal(triangles_[k]);
+  }
+}
+
+void EmbreeBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
+  if (scene_ == nullptr) return;
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRay rtc_ray;
+  for (const uint32_t i : ray_ids) {
+    if (occluded[i] != 0) continue;
+    const Ray& ray = rays[i];
+    if (!(ray.tfar > ray.tnear)) continue;
+    fill_ray(ray, ray.tfar, rtc_ray);
+    rtcOccluded1(scene_, &context, &rtc_ray);
+    if (rtc_ray.tfar == -std::numeric_limits<float>::infinity()) occluded[i] = 1;
+  }
+}
+
+Expected<std::unique_ptr<BrickAccel>> EmbreeBrickBuilder::build(BrickData&& brick) const {
+  OUTCORE_ASSIGN_OR_RETURN(auto accel, EmbreeBrickAccel::build(std::move(brick), config_));
+  return std::unique_ptr<BrickAccel>(std::move(accel));
+}
+
+const std::string& EmbreeBrickBuilder::name() const {
+  static const std::string kName = "embree";
+  return kName;
+}
+
+}  // namespace outcore

@@ -1,0 +1,156 @@
+// EmbreeBrickAccel: a brick's triangles in one Embree 3 scene (one triangle
+// geometry over shared buffers), and EmbreeBrickBuilder, the BrickBuilder that
+// makes them (registered as "embree" in brick_accel_factory.cpp).
+//
+// Buffers. The brick's triangle soup is Embree's vertex buffer as is (vertex
+// 3k+j is vertex j of triangle k); Embree reads every vertex with a 16-byte
+// load, so the soup needs 4 bytes of slack after its last vertex: a brick whose
+// triangle vector has spare capacity is used in place, otherwise it is copied
+// once into a vector of n + 1 triangles (the store can avoid the copy by
+// reserving one extra triangle). The index buffer lists (3k, 3k+1, 3k+2) for
+// every triangle that is not degenerate in float64 (Triangle::is_degenerate);
+// degenerate ones are left out of the scene, which both saves BVH memory and
+// keeps Embree's float arithmetic from reporting hits on triangles the float64
+// reference can never hit. The TriangleId array maps Embree's primID (via the
+// index buffer) to the user's (geometry_id, primitive_id).
+//
+// Hits. intersect() follows Embree's segment rule: a hit at t counts when
+// tnear < t <= tfar. It traces each ray over [tnear, min(tfar, hits[i].t +
+// margin)], where the margin (2^-18 relative, about 32 float ulps) lets a
+// triangle at exactly hits[i].t — a duplicate of the current best in another
+// brick — reach hit_is_better() even though Embree compares t <= tfar on
+// rescaled values; so ties between bricks are settled by the tie rule, never by
+// the order bricks are visited in. Within one brick, triangles at bitwise equal
+// t (duplicates) are settled by Embree's traversal order, deterministically.
+// Written per accepted hit: t (Embree's), the user's ids, Embree's u, v (p =
+// (1-u-v) v0 + u v1 + v v2) and the unit geometric normal computed in float64
+// from the stored vertices as normalize(cross(v1 - v0, v2 - v0)), rounded to
+// float. This is Embree's sign convention (its Ng is cross(e2, e1) with e1 =
+// v0 - v1, e2 = v2 - v0, which equals cross(v1 - v0, v2 - v0)) and therefore
+// Open3D's (primitive_normals = Embree's Ng normalised): the normal points to
+// the side from which the triangle's vertices appear counter-clockwise,
+// whichever side the ray comes from.
+//
+// Memory. memory_bytes() = the capacities of the triangle, id and index
+// buffers + the bytes Embree's memory monitor attributed to this scene (see
+// EmbreeDevice) + kUntrackedBytes for the objects Embree allocates without
+// reporting them (scene, geometry, accel headers) and this object. The build's
+// peak (input brick, copies, buffers and Embree's peak during commit) is
+// build_peak_bytes(); reserve_bytes() bounds both (formula and measurements in
+// embree_brick.cpp).
+//
+// Thread-safety: build() may be called from many threads (the Embree part is
+// serialised, see EmbreeDevice); a built accel is immutable and intersect() /
+// occluded() may run concurrently on disjoint ray subsets. The destructor
+// releases the scene under the device's allocation mutex.
+#pragma once
+
+#include <embree3/rtcore.h>
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/accel/brick_accel_factory.h"
+#include "core/store/brick_data.h"
+
+namespace outcore {
+
+enum class EmbreeQuality {
+  kLow,     // Morton-code builder: fastest build, slowest traversal
+  kMedium,  // binned SAH
+  kHigh,    // binned SAH with spatial splits: slowest build, fastest traversal
+};
+
+struct EmbreeBrickConfig {
+  // RTC_SCENE_FLAG_ROBUST: Embree avoids optimisations that lose accuracy
+  // (watertight edge tests, vertex-based leaves). Default off: a little
+  // faster, and the tests against the float64 reference pass either way.
+  bool robust = false;
+  // RTC_BUILD_QUALITY_*. Default high: see brick_accel_factory.cpp for the
+  // measurement that chose it.
+  EmbreeQuality quality = EmbreeQuality::kHigh;
+};
+
+class EmbreeBrickAccel final : public BrickAccel {
+ public:
+  // Largest brick: Embree's index buffer holds 3n uint32 vertex indices.
+  static constexpr uint64_t kMaxTriangles = 0x55555554u;
+  // Bytes Embree allocates per scene without reporting them to the monitor
+  // (Scene, TriangleMesh, BVH headers, task-group state; measured with
+  // mallinfo2 at about 7 KiB per scene), plus this object; counted in
+  // memory_bytes() with margin.
+  static constexpr uint64_t kUntrackedBytes = 12 * 1024;
+
+  // Consumes the brick. INVALID_ARGUMENT when ids and triangles differ in
+  // count, OUT_OF_RANGE beyond kMaxTriangles, Embree's errors as Status.
+  static Expected<std::unique_ptr<EmbreeBrickAccel>> build(BrickData&& brick, const EmbreeBrickConfig& config);
+  // Upper bound on memory_bytes() and build_peak_bytes() of a brick of n
+  // triangles built with `config`.
+  static uint64_t reserve_bytes(uint64_t triangle_count, const EmbreeBrickConfig& config);
+
+  ~EmbreeBrickAccel() override;
+  EmbreeBrickAccel(const EmbreeBrickAccel&) = delete;
+  EmbreeBrickAccel& operator=(const EmbreeBrickAccel&) = delete;
+
+  void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
+  void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
+
+  uint64_t memory_bytes() const override;
+  double build_seconds() const override { return build_seconds_; }
+  uint32_t triangle_count() const override { return static_cast<uint32_t>(ids_.size()); }
+
+  // Beyond BrickAccel (statistics and tests):
+  uint32_t brick_id() const { return brick_id_; }
+  const EmbreeBrickConfig& config() const { return config_; }
+  // Triangles in the Embree scene (the non-degenerate ones).
+  uint32_t scene_triangle_count() const { return static_cast<uint32_t>(indices_.size() / 3); }
+  // What Embree's memory monitor attributed to this scene after the commit.
+  uint64_t embree_bytes() const { return embree_bytes_; }
+  // Peak during build(): bytes of the consumed brick still alive, our buffers,
+  // and Embree's peak during the commit, plus kUntrackedBytes.
+  uint64_t build_peak_bytes() const { return build_peak_bytes_; }
+
+ private:
+  EmbreeBrickAccel() = default;
+  struct TieRecord;
+  struct TieContext;
+  static void tie_filter(const RTCFilterFunctionNArguments* args);
+  uint64_t buffer_bytes() const;
+  void write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray, std::size_t begin,
+                  std::size_t end, Hit* hits) const;
+  // The brick triangle behind Embree's primID, and its user id as one key.
+  uint32_t triangle_of(uint32_t prim) const { return prim_is_triangle_ ? prim : indices_[3 * prim] / 3; }
+  uint64_t key_of(uint32_t prim) const;
+
+  EmbreeBrickConfig config_;
+  uint32_t brick_id_ = 0;
+  RTCScene scene_ = nullptr;  // null for a brick without non-degenerate triangles
+  std::vector<Triangle> triangles_;  // Embree's vertex buffer; capacity > size
+  std::vector<TriangleId> ids_;      // ids_[k] names triangles_[k]
+  std::vector<uint32_t> indices_;    // Embree's index buffer; capacity > size
+  bool prim_is_triangle_ = true;     // no degenerate left out: primID == k
+  float max_extent_ = 0;             // largest side of the brick's bounds
+  uint64_t embree_bytes_ = 0;
+  uint64_t build_peak_bytes_ = 0;
+  double build_seconds_ = 0;
+};
+
+class EmbreeBrickBuilder final : public BrickBuilder {
+ public:
+  explicit EmbreeBrickBuilder(const EmbreeBrickConfig& config) : config_(config) {}
+
+  Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override;
+  uint64_t reserve_bytes(uint32_t triangle_count) const override {
+    return EmbreeBrickAccel::reserve_bytes(triangle_count, config_);
+  }
+  const std::string& name() const override;
+  const EmbreeBrickConfig& config() const { return config_; }
+
+ private:
+  EmbreeBrickConfig config_;
+};
+
+}  // namespace outcore

@@ -1,0 +1,124 @@
+#include <CLI/CLI.hpp>
+#include <tbb/global_control.h>
+
+#include <cstdio>
+#include <algorithm>
+#include <fstream>
+#include <memory>
+
+#include "core/cli/commands.h"
+#include "core/io/npy.h"
+#include "core/query/query_engine.h"
+
+namespace outcore {
+
+namespace {
+
+struct TraceArgs {
+  std::string scene;
+  std::string rays_path;
+  std::string output_path;
+  bool any_hit = false;
+  uint64_t cache_mb = 1024;
+  std::string policy = "lru";
+  std::string brick_accel = "embree";
+  std::vector<std::string> accel_options;
+  bool no_reorder = false;
+  int threads = 0;
+  bool print_stats = false;
+  std::string stats_json_path;
+  bool strict = false;
+  int repeat = 1;
+};
+
+Expected<BrickAccelOptions> parse_accel_options(const std::vector<std::string>& items) {
+  BrickAccelOptions options;
+  for (const std::string& item : items) {
+    const auto eq = item.find('=');
+    if (eq == std::string::npos || eq == 0) {
+      return invalid_argument("--accel-opt '" + item + "' is not of the form key=value");
+    }
+    if (!options.emplace(item.substr(0, eq), item.substr(eq + 1)).second) {
+      return invalid_argument("--accel-opt '" + item.substr(0, eq) + "' given twice");
+    }
+  }
+  return options;
+}
+
+int run_trace(const TraceArgs& args) {
+  std::unique_ptr<tbb::global_control> threads;
+  if (args.threads > 0) {
+    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, args.threads);
+  }
+  auto accel_options = parse_accel_options(args.accel_options);
+  if (!accel_options.ok()) return report_command_error("trace", accel_options.status().message());
+  EngineOptions engine_options;
+  engine_options.cache_bytes = args.cache_mb << 20;
+  engine_options.eviction_policy = args.policy;
+  engine_options.brick_accel = args.brick_accel;
+  engine_options.accel_options = *accel_options;
+  auto engine = QueryEngine::open(args.scene, engine_options);
+  if (!engine.ok()) return report_command_error("trace", engine.status().message());
+  auto rays = read_rays_npy(args.rays_path);
+  if (!rays.ok()) return report_command_error("trace", rays.status().message());
+
+  QueryOptions query_options;
+  query_options.reorder = !args.no_reorder;
+  query_options.strict = args.strict;
+  // Repeats run the same batch again on the now warm cache (the first run is
+  // the cold one: time to first hit); the output is the last run's.
+  std::vector<QueryStats> runs;
+  std::vector<uint8_t> occluded(args.any_hit ? rays->size() : 0);
+  std::vector<Hit> hits(args.any_hit ? 0 : rays->size());
+  for (int r = 0; r < std::max(1, args.repeat); ++r) {
+    QueryStats stats;
+    const Status status = args.any_hit ? (*engine)->occluded(*rays, occluded, query_options, &stats)
+                                       : (*engine)->intersect(*rays, hits, query_options, &stats);
+    if (!status.ok()) return report_command_error("trace", status.message());
+    if (args.print_stats) {
+      if (args.repeat > 1) std::printf("run %d/%d (%s cache)\n", r + 1, args.repeat, r == 0 ? "cold" : "warm");
+      std::fputs(stats.to_text().c_str(), stdout);
+    }
+    runs.push_back(stats);
+  }
+  const Status written = args.any_hit ? write_bools_npy(args.output_path, occluded)
+                                      : write_hits_npy(args.output_path, hits);
+  if (!written.ok()) return report_command_error("trace", written.message());
+  if (!args.stats_json_path.empty()) {
+    std::ofstream out(args.stats_json_path);
+    if (runs.size() == 1) {
+      out << runs[0].to_json() << "\n";
+    } else {
+      out << "[";
+      for (size_t r = 0; r < runs.size(); ++r) out << (r ? "," : "") << runs[r].to_json();
+      out << "]\n";
+    }
+    if (!out) return report_command_error("trace", "cannot write " + args.stats_json_path);
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_trace_command(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<TraceArgs>();
+  CLI::App* cmd = app.add_subcommand("trace", "Trace a rays .npy against a scene store, in process");
+  cmd->add_option("scene", args->scene, "Scene store directory")->required();
+  cmd->add_option("--rays", args->rays_path, "Rays .npy: float32 (N,6) or (N,8)")->required();
+  cmd->add_option("-o,--output", args->output_path, "Hits .npy to write (bool .npy with --any-hit)")->required();
+  cmd->add_flag("--any-hit", args->any_hit, "Occlusion query: write whether each ray hits anything");
+  cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
+  cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
+  cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
+  cmd->add_option("--accel-opt", args->accel_options, "Brick structure option key=value (repeatable)");
+  cmd->add_flag("--no-reorder", args->no_reorder, "Trace rays one by one in input order (for comparison)");
+  cmd->add_option("--threads", args->threads, "Worker threads (default: all cores)");
+  cmd->add_flag("--stats", args->print_stats, "Print query statistics");
+  cmd->add_option("--stats-json", args->stats_json_path, "Write query statistics as JSON to this file");
+  cmd->add_option("--repeat", args->repeat, "Run the batch this many times (first cold, then warm)")
+      ->capture_default_str();
+  cmd->add_flag("--strict", args->strict, "Invalid rays are an error naming the first one (default: misses)");
+  cmd->callback([args, &exit_code] { exit_code = run_trace(*args); });
+}
+
+}  // namespace outcore

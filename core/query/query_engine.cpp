@@ -1,0 +1,297 @@
+#include "core/query/query_engine.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "core/upper/upper_traversal.h"
+#include "core/util/json_writer.h"
+
+namespace outcore {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+// Upcoming bricks kept per ray; more are found by re-traversal when used up.
+constexpr std::size_t kWindow = 4;
+// Rays per task when tracing inside a brick.
+constexpr std::size_t kRayGrain = 512;
+
+struct RayProgress {
+  std::array<BrickKey, kWindow> window;
+  BrickKey last;  // the key of the brick being (or last) traced
+  uint8_t count = 0;
+  uint8_t next = 0;
+};
+
+}  // namespace
+
+const char* ray_problem(const Ray& ray) {
+  if (!is_finite(ray.origin)) return "origin is NaN or infinite";
+  if (!is_finite(ray.direction)) return "direction is NaN or infinite";
+  if (ray.direction == Vec3f(0, 0, 0)) return "direction is zero";
+  if (!std::isfinite(ray.tnear) || ray.tnear < 0.0f) return "tnear is negative, NaN or infinite";
+  if (std::isnan(ray.tfar)) return "tfar is NaN";
+  if (ray.tnear > ray.tfar) return "tnear > tfar";
+  return nullptr;
+}
+
+Expected<std::unique_ptr<QueryEngine>> QueryEngine::open(const std::string& store_directory,
+                                                         const EngineOptions& options) {
+  OUTCORE_ASSIGN_OR_RETURN(auto store, SceneStore::open(store_directory));
+  return create(std::move(store), options);
+}
+
+Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const SceneStore> store,
+                                                           const EngineOptions& options) {
+  if (options.cache_bytes == 0) return invalid_argument("the cache budget must be positive");
+  OUTCORE_ASSIGN_OR_RETURN(auto builder, make_brick_builder(options.brick_accel, options.accel_options));
+  OUTCORE_ASSIGN_OR_RETURN(auto policy, make_eviction_policy(options.eviction_policy));
+  auto cache = std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
+  return std::unique_ptr<QueryEngine>(new QueryEngine(std::move(store), std::move(cache)));
+}
+
+Status QueryEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits, const QueryOptions& options,
+                              QueryStats* stats) {
+  if (hits.size() != rays.size()) return invalid_argument("hits and rays differ in length");
+  return run<QueryKind::kClosestHit>(rays, hits.data(), nullptr, options, stats);
+}
+
+Status QueryEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded, const QueryOptions& options,
+                             QueryStats* stats) {
+  if (occluded.size() != rays.size()) return invalid_argument("occlusion flags and rays differ in length");
+  return run<QueryKind::kAnyHit>(rays, nullptr, occluded.data(), options, stats);
+}
+
+template <QueryKind kKind>
+Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
+                        QueryStats* stats_out) {
+  const auto start = Clock::now();
+  const CacheCounters counters_before = cache_->counters();
+  const UpperHierarchy& upper = store_->manifest().upper;
+  const std::size_t n = rays.size();
+  QueryStats stats;
+  stats.rays = n;
+
+  std::vector<uint8_t> valid(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const char* problem = ray_problem(rays[i]);
+    valid[i] = problem == nullptr;
+    if (problem != nullptr) {
+      if (options.strict) return invalid_argument("ray " + std::to_string(i) + ": " + problem);
+      ++stats.invalid_rays;
+    }
+    if constexpr (kKind == QueryKind::kClosestHit) {
+      hits[i] = Hit{};
+    } else {
+      occluded[i] = 0;
+    }
+  }
+
+  // The largest distance at which a brick can still matter for ray i.
+  auto horizon = [&](std::size_t i) {
+    if constexpr (kKind == QueryKind::kClosestHit) return std::min(rays[i].tfar, hits[i].t);
+    return rays[i].tfar;
+  };
+  auto finished = [&](std::size_t i) {
+    if constexpr (kKind == QueryKind::kAnyHit) return occluded[i] != 0;
+    return false;
+  };
+  auto trace = [&](const BrickAccel& accel, std::span<const uint32_t> ids) {
+    if constexpr (kKind == QueryKind::kClosestHit) {
+      accel.intersect(ids, rays.data(), hits);
+    } else {
+      accel.occluded(ids, rays.data(), occluded);
+    }
+  };
+  std::vector<RayProgress> progress(n);
+  // Moves ray i past its current brick; returns the next brick or kInvalidId.
+  auto advance = [&](std::size_t i, uint64_t& nodes) -> uint32_t {
+    RayProgress& p = progress[i];
+    if (finished(i)) return kInvalidId;
+    const float limit = horizon(i);
+    if (p.next < p.count) {
+      const BrickKey key = p.window[p.next];
+      if (key.entry > limit) return kInvalidId;
+      p.last = key;
+      ++p.next;
+      return key.brick;
+    }
+    p.count = static_cast<uint8_t>(next_bricks(upper, SlabRay(rays[i]), rays[i].tnear, limit, p.last, p.window, nodes));
+    p.next = 0;
+    if (p.count == 0) return kInvalidId;
+    p.last = p.window[0];
+    p.next = 1;
+    return p.last.brick;
+  };
+
+  auto acquire = [&](uint32_t brick, PinnedBrick& pin) -> Status {
+    const auto t0 = Clock::now();
+    auto acquired = cache_->acquire(brick);
+    stats.seconds_build += seconds_since(t0);
+    if (!acquired.ok()) return acquired.status();
+    pin = std::move(acquired).value();
+    ++stats.brick_acquisitions;
+    ++(pin.was_hit() ? stats.cache_hits : stats.cache_misses);
+    return Status::Ok();
+  };
+
+  if (!options.reorder) {
+    // One ray at a time, in input order, brick by brick.
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!valid[i]) continue;
+      const uint32_t id = static_cast<uint32_t>(i);
+      const auto t0 = Clock::now();
+      for (uint32_t brick = advance(i, stats.upper_nodes_visited); brick != kInvalidId;
+           brick = advance(i, stats.upper_nodes_visited)) {
+        PinnedBrick pin;
+        OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
+        trace(pin.accel(), std::span<const uint32_t>(&id, 1));
+        ++stats.brick_visits;
+      }
+      stats.seconds_brick += seconds_since(t0);
+    }
+  } else {
+    const uint32_t brick_count = store_->brick_count();
+    std::vector<std::vector<uint32_t>> queues(brick_count);
+    std::vector<uint32_t> waiting;  // bricks with a non-empty queue
+    std::vector<uint8_t> is_waiting(brick_count, 0);
+    auto enqueue = [&](uint32_t brick, uint32_t ray) {
+      queues[brick].push_back(ray);
+      if (!is_waiting[brick]) {
+        is_waiting[brick] = 1;
+        waiting.push_back(brick);
+      }
+    };
+
+    // First brick of every ray, in parallel; per-chunk results merged in order.
+    const auto t_upper = Clock::now();
+    const std::size_t chunks = (n + kRayGrain - 1) / kRayGrain;
+    std::vector<uint64_t> chunk_nodes(chunks, 0);
+    std::vector<uint32_t> first(n, kInvalidId);
+    tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+      uint64_t nodes = 0;
+      for (std::size_t i = c * kRayGrain; i < std::min(n, (c + 1) * kRayGrain); ++i) {
+        if (valid[i]) first[i] = advance(i, nodes);
+      }
+      chunk_nodes[c] = nodes;
+    });
+    for (uint64_t nodes : chunk_nodes) stats.upper_nodes_visited += nodes;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (first[i] != kInvalidId) enqueue(first[i], static_cast<uint32_t>(i));
+    }
+    first = {};
+    stats.seconds_upper = seconds_since(t_upper);
+
+    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> moved;  // per chunk: (next brick, ray)
+    while (!waiting.empty()) {
+      // Resident bricks first (no build), then the longest queue.
+      std::size_t best = 0;
+      bool best_resident = cache_->is_resident(waiting[0]);
+      for (std::size_t k = 1; k < waiting.size(); ++k) {
+        const uint32_t b = waiting[k];
+        const bool resident = cache_->is_resident(b);
+        if (resident != best_resident ? resident
+                                      : queues[b].size() > queues[waiting[best]].size()) {
+          best = k;
+          best_resident = resident;
+        }
+      }
+      const uint32_t brick = waiting[best];
+      waiting[best] = waiting.back();
+      waiting.pop_back();
+      is_waiting[brick] = 0;
+      std::vector<uint32_t> batch = std::move(queues[brick]);
+      queues[brick] = {};
+
+      PinnedBrick pin;
+      OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
+      const auto t_brick = Clock::now();
+      const BrickAccel& accel = pin.accel();
+      const std::size_t batch_chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
+      moved.assign(batch_chunks, {});
+      chunk_nodes.assign(batch_chunks, 0);
+      tbb::parallel_for(std::size_t{0}, batch_chunks, [&](std::size_t c) {
+        const std::size_t begin = c * kRayGrain, end = std::min(batch.size(), begin + kRayGrain);
+        const std::span<const uint32_t> ids(batch.data() + begin, end - begin);
+        trace(accel, ids);
+        uint64_t nodes = 0;
+        for (const uint32_t ray : ids) {
+          const uint32_t next = advance(ray, nodes);
+          if (next != kInvalidId) moved[c].emplace_back(next, ray);
+        }
+        chunk_nodes[c] = nodes;
+      });
+      pin.release();
+      stats.brick_visits += batch.size();
+      for (std::size_t c = 0; c < batch_chunks; ++c) {
+        stats.upper_nodes_visited += chunk_nodes[c];
+        for (const auto& [next, ray] : moved[c]) enqueue(next, ray);
+      }
+      stats.seconds_brick += seconds_since(t_brick);
+    }
+  }
+
+  for (std::size_t i = 0; i < n; ++i) {
+    if constexpr (kKind == QueryKind::kClosestHit) {
+      stats.rays_hit += hits[i].is_hit();
+    } else {
+      stats.rays_hit += occluded[i] != 0;
+    }
+  }
+  const CacheCounters counters_after = cache_->counters();
+  stats.brick_builds = counters_after.builds - counters_before.builds;
+  stats.evictions = counters_after.evictions - counters_before.evictions;
+  stats.peak_bytes_resident = counters_after.peak_resident_bytes;
+  stats.cache_budget_bytes = cache_->budget_bytes();
+  stats.seconds_total = seconds_since(start);
+  if (stats_out != nullptr) *stats_out = stats;
+  return Status::Ok();
+}
+
+std::string QueryStats::to_json() const {
+  JsonWriter j;
+  j.begin_object();
+  j.field("rays", rays).field("invalid_rays", invalid_rays).field("rays_hit", rays_hit);
+  j.field("upper_nodes_visited", upper_nodes_visited).field("brick_visits", brick_visits);
+  j.field("brick_acquisitions", brick_acquisitions).field("cache_hits", cache_hits).field("cache_misses", cache_misses);
+  j.field("brick_builds", brick_builds).field("evictions", evictions);
+  j.field("peak_bytes_resident", peak_bytes_resident).field("cache_budget_bytes", cache_budget_bytes);
+  j.key("seconds").begin_object();
+  j.field("total", seconds_total).field("upper", seconds_upper).field("build", seconds_build);
+  j.field("brick", seconds_brick).end_object();
+  j.field("rays_per_second", seconds_total > 0 ? rays / seconds_total : 0.0);
+  j.end_object();
+  return j.str();
+}
+
+std::string QueryStats::to_text() const {
+  char buf[1024];
+  std::snprintf(buf, sizeof buf,
+                "rays %llu (%llu hit, %llu invalid) in %.3f s = %.2f M rays/s\n"
+                "  upper: %llu nodes visited, %.3f s first pass\n"
+                "  bricks: %llu ray visits, %llu acquisitions (%llu hits, %llu misses), %llu builds, %llu "
+                "evictions\n"
+                "  cache: peak %.1f MiB of %.1f MiB budget\n"
+                "  time: build/wait %.3f s, brick traversal %.3f s\n",
+                static_cast<unsigned long long>(rays), static_cast<unsigned long long>(rays_hit),
+                static_cast<unsigned long long>(invalid_rays), seconds_total,
+                seconds_total > 0 ? rays / seconds_total / 1e6 : 0.0,
+                static_cast<unsigned long long>(upper_nodes_visited), seconds_upper,
+                static_cast<unsigned long long>(brick_visits), static_cast<unsigned long long>(brick_acquisitions),
+                static_cast<unsigned long long>(cache_hits), static_cast<unsigned long long>(cache_misses),
+                static_cast<unsigned long long>(brick_builds), static_cast<unsigned long long>(evictions),
+                peak_bytes_resident / 1048576.0, cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
+  return buf;
+}
+
+template Status QueryEngine::run<QueryKind::kClosestHit>(std::span<const Ray>, Hit*, uint8_t*, const QueryOptions&,
+                                                         QueryStats*);
+template Status QueryEngine::run<QueryKind::kAnyHit>(std::span<const Ray>, Hit*, uint8_t*, const QueryOptions&,
+                                                     QueryStats*);
+
+}  // namespace outcore

@@ -1,0 +1,103 @@
+// QueryEngine: answers closest-hit and any-hit queries for ray batches against
+// an opened scene store. The store's manifest and fixed upper hierarchy stay
+// resident; brick structures are built on first need into a byte-budgeted
+// BrickCache (core/cache). With reordering (the default; Pharr et al. 1997) the
+// rays of a batch queue at bricks, bricks are processed one at a time —
+// resident ones first, then the longest queue — and each ray advances brick by
+// brick in its own front-to-back order (upper_traversal.h), finishing once its
+// hit is nearer than the next brick's entry (closest hit) or at its first hit
+// (any hit). Each ray therefore visits the same bricks in the same order
+// whatever the batch, budget, policy or thread count, so answers are bitwise
+// identical across all of them.
+//
+// Invalid rays (NaN/Inf components, zero direction, tnear < 0 or not finite,
+// tnear > tfar, NaN tfar) are answered as misses and counted; with strict
+// they are an INVALID_ARGUMENT naming the first bad ray.
+//
+// Thread-safety: intersect() and occluded() may be called concurrently from
+// several threads; concurrent batches share the cache (and its budget).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "core/accel/brick_accel_factory.h"
+#include "core/cache/brick_cache.h"
+#include "core/query/query_types.h"
+#include "core/query/ray_types.h"
+#include "core/store/scene_store.h"
+
+namespace outcore {
+
+struct EngineOptions {
+  // Hard budget for built bricks, in bytes.
+  uint64_t cache_bytes = uint64_t{1024} << 20;
+  std::string eviction_policy = "lru";
+  std::string brick_accel = "embree";
+  BrickAccelOptions accel_options;
+};
+
+struct QueryOptions {
+  // Queue rays at bricks and process brick by brick; false runs the rays one
+  // by one in input order (for comparison).
+  bool reorder = true;
+  // Invalid rays are an error instead of counted misses.
+  bool strict = false;
+};
+
+struct QueryStats {
+  uint64_t rays = 0;
+  uint64_t invalid_rays = 0;
+  uint64_t rays_hit = 0;
+  uint64_t upper_nodes_visited = 0;
+  uint64_t brick_visits = 0;        // (ray, brick) traversals
+  uint64_t brick_acquisitions = 0;  // times a brick was taken from the cache
+  uint64_t cache_hits = 0;
+  uint64_t cache_misses = 0;
+  uint64_t brick_builds = 0;  // cache-wide during this query (others' batches included)
+  uint64_t evictions = 0;     // likewise
+  uint64_t peak_bytes_resident = 0;
+  uint64_t cache_budget_bytes = 0;
+  double seconds_total = 0;
+  double seconds_upper = 0;  // first upper-hierarchy pass for every ray
+  double seconds_build = 0;  // waiting for bricks: load + build (or another batch's build)
+  double seconds_brick = 0;  // tracing inside bricks, plus finding each ray's next brick
+
+  std::string to_json() const;
+  std::string to_text() const;
+};
+
+class QueryEngine {
+ public:
+  static Expected<std::unique_ptr<QueryEngine>> open(const std::string& store_directory, const EngineOptions& options);
+  static Expected<std::unique_ptr<QueryEngine>> create(std::shared_ptr<const SceneStore> store,
+                                                       const EngineOptions& options);
+
+  // hits.size() must equal rays.size().
+  Status intersect(std::span<const Ray> rays, std::span<Hit> hits, const QueryOptions& options,
+                   QueryStats* stats = nullptr);
+  // occluded[i] = 1 when ray i hits anything in [tnear, tfar].
+  Status occluded(std::span<const Ray> rays, std::span<uint8_t> occluded, const QueryOptions& options,
+                  QueryStats* stats = nullptr);
+
+  const SceneStore& store() const { return *store_; }
+  const BrickCache& cache() const { return *cache_; }
+
+ private:
+  QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache)
+      : store_(std::move(store)), cache_(std::move(cache)) {}
+
+  template <QueryKind kKind>
+  Status run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
+             QueryStats* stats);
+
+  std::shared_ptr<const SceneStore> store_;
+  std::unique_ptr<BrickCache> cache_;
+};
+
+// Why a ray is invalid, or nullptr when it is fine.
+const char* ray_problem(const Ray& ray);
+
+}  // namespace outcore
