@@ -2,6 +2,7 @@
 # Installs exactly what is missing for building, testing and benchmarking Outcore
 # on Debian 12: apt packages (all C++ dependencies) and a Python venv in .venv.
 # Idempotent: a second run installs nothing and takes a second or two.
+# With --bench it also makes .venv-bench with Open3D and matplotlib.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -38,5 +39,23 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   .venv/bin/pip install -q --upgrade pip >/dev/null
   .venv/bin/pip install -q -r "$PY_REQS"
   echo "$want" > "$stamp"
+fi
+# Benchmarks compare against Open3D (large), kept out of the test venv.
+if [ "${1:-}" = "--bench" ]; then
+  missing=()
+  for p in libusb-1.0-0 libgl1 libgomp1; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  if ((${#missing[@]})); then
+    SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  fi
+  [ -x .venv-bench/bin/python ] || python3 -m venv .venv-bench
+  bench_stamp=.venv-bench/.requirements.sha
+  bench_want=$(sha256sum scripts/requirements-bench.txt | cut -d' ' -f1)
+  if [ "$(cat "$bench_stamp" 2>/dev/null)" != "$bench_want" ]; then
+    .venv-bench/bin/pip install -q -r scripts/requirements-bench.txt
+    echo "$bench_want" > "$bench_stamp"
+  fi
 fi
 echo "[install] ok"

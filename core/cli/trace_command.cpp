@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <algorithm>
 #include <fstream>
+#include <limits>
 #include <memory>
 
 #include "core/cli/commands.h"
@@ -52,6 +53,11 @@ int run_trace(const TraceArgs& args) {
   }
   auto accel_options = parse_accel_options(args.accel_options);
   if (!accel_options.ok()) return report_command_error("trace", accel_options.status().message());
+  if (args.cache_mb == 0 || args.cache_mb > (std::numeric_limits<uint64_t>::max() >> 20)) {
+    return report_command_error("trace", "--cache-mb must be between 1 and " +
+                                             std::to_string(std::numeric_limits<uint64_t>::max() >> 20) + ", got " +
+                                             std::to_string(args.cache_mb));
+  }
   EngineOptions engine_options;
   engine_options.cache_bytes = args.cache_mb << 20;
   engine_options.eviction_policy = args.policy;

@@ -104,9 +104,13 @@ Expected<std::string> read_whole_file(const std::string& path) {
 // Checks shape, dtype and size; returns the data bytes.
 Expected<std::string_view> array_data(std::string_view bytes, const std::string& name, const NpyHeader& header,
                                       uint64_t record_bytes) {
-  uint64_t elements = 1;
-  for (uint64_t d : header.shape) elements *= d;
-  const uint64_t want = header.shape.empty() ? record_bytes : elements * record_bytes;
+  uint64_t want = record_bytes;
+  for (uint64_t d : header.shape) {
+    if (d != 0 && want > std::numeric_limits<uint64_t>::max() / d) {
+      return invalid_argument(name + " has shape " + shape_text(header.shape) + ", too large for any file");
+    }
+    want *= d;
+  }
   const uint64_t have = bytes.size() - header.data_offset;
   if (have < want) {
     return data_loss(name + " is truncated: shape " + shape_text(header.shape) + " needs " + std::to_string(want) +
@@ -122,9 +126,10 @@ Expected<std::string_view> array_data(std::string_view bytes, const std::string&
 }  // namespace
 
 Expected<NpyHeader> parse_npy_header(std::string_view bytes, const std::string& name) {
-  if (bytes.size() < kMagicBytes + 4 || std::memcmp(bytes.data(), kMagic, kMagicBytes) != 0) {
+  if (bytes.size() < kMagicBytes || std::memcmp(bytes.data(), kMagic, kMagicBytes) != 0) {
     return invalid_argument(name + " is not a .npy file (bad magic)");
   }
+  if (bytes.size() < kMagicBytes + 4) return data_loss(name + " is truncated inside its .npy header");
   const auto major = static_cast<uint8_t>(bytes[6]);
   uint64_t header_len = 0;
   std::size_t prefix = 0;

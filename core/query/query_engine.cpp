@@ -26,6 +26,9 @@ struct RayProgress {
   BrickKey last;  // the key of the brick being (or last) traced
   uint8_t count = 0;
   uint8_t next = 0;
+  // The last fill found fewer than kWindow bricks: the window holds every
+  // brick left (horizons only shrink), so no refill is needed.
+  bool complete = false;
 };
 
 }  // namespace
@@ -121,7 +124,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       ++p.next;
       return key.brick;
     }
+    if (p.complete) return kInvalidId;
     p.count = static_cast<uint8_t>(next_bricks(upper, SlabRay(rays[i]), rays[i].tnear, limit, p.last, p.window, nodes));
+    p.complete = p.count < kWindow;
     p.next = 0;
     if (p.count == 0) return kInvalidId;
     p.last = p.window[0];

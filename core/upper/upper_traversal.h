@@ -50,10 +50,6 @@ namespace detail {
 // 2*gamma(3) with gamma(n) = n*eps/(1-n*eps), eps = 2^-24.
 inline constexpr float kSlabWiden = 2.0f * (3.0f * 5.9604645e-8f) / (1.0f - 3.0f * 5.9604645e-8f);
 
-// max/min that treat a NaN second argument as "no constraint".
-inline float max_keep(float a, float b) { return b > a ? b : a; }
-inline float min_keep(float a, float b) { return b < a ? b : a; }
-
 // Conservative [entry, exit] of the ray against the box, clipped to [tmin, tmax];
 // true when the segment touches the box and the exit is at least min_exit.
 inline bool slab_test(const SlabRay& ray, const Aabb& box, float tmin, float tmax, float min_exit, float& entry) {
@@ -61,12 +57,15 @@ inline bool slab_test(const SlabRay& ray, const Aabb& box, float tmin, float tma
   for (int axis = 0; axis < 3; ++axis) {
     const float t0 = (box.lo[axis] - ray.origin[axis]) * ray.inverse_direction[axis];
     const float t1 = (box.hi[axis] - ray.origin[axis]) * ray.inverse_direction[axis];
-    const float near = t0 < t1 ? t0 : t1;
-    const float far = t0 < t1 ? t1 : t0;
-    // near/far are NaN only when both products are (0 * inf); then the slab
-    // cannot exclude anything.
-    lo = max_keep(lo, near * (near > 0 ? 1.0f - kSlabWiden : 1.0f + kSlabWiden));
-    hi = min_keep(hi, far * (far > 0 ? 1.0f + kSlabWiden : 1.0f - kSlabWiden));
+    const float near = std::fmin(t0, t1);
+    const float far = std::fmax(t0, t1);
+    // fmin/fmax return the other operand for one NaN; both are NaN only for
+    // 0 * inf (origin on the slab plane, direction parallel to it), and then
+    // the comparisons below are false: the slab constrains nothing.
+    const float widened_near = near - std::fabs(near) * kSlabWiden;
+    const float widened_far = far + std::fabs(far) * kSlabWiden;
+    lo = widened_near > lo ? widened_near : lo;
+    hi = widened_far < hi ? widened_far : hi;
   }
   entry = lo;
   return lo <= hi && hi >= min_exit;

@@ -1,0 +1,137 @@
+#!/usr/bin/env python3
+"""Trace benchmark: in-process `outcore trace` against Open3D's
+RaycastingScene.cast_rays on the same triangles and the same rays, same run,
+2 threads each. Scenes: the bunny and a generated city (~15 M triangles).
+
+For each scene and ray set (1M incoherent, 1M camera; bench/make_rays.py):
+- outcore trace --repeat R: run 1 is cold (every brick built: time to first
+  answer), runs 2..R warm (fully cached); the warm median is compared;
+- the same with --no-reorder (warm median);
+- Open3D 0.20 cast_rays, median of R runs, on the triangles read back from the
+  store's brick file (so both trace bit-identical triangles);
+- agreement: the fraction of rays whose hit/miss and (geometry, primitive) ids
+  agree between the two.
+
+Needs the bench venv: `bash scripts/install.sh --bench`.
+Usage: .venv-bench/bin/python bench/trace_bench.py [--runs 6] [--rays 1000000] [--scenes bunny,city]
+"""
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+OUTCORE = os.path.join(ROOT, "build", "client", "outcore")
+SCENES = {
+    "bunny": [os.path.join(ROOT, "..", "shared", "models", "stanford-bunny.obj")],
+    "city": ["gen:city?of=(gen:sphere?level=5)&copies=732"],  # 14.99 M triangles
+}
+HIT_DTYPE = np.dtype([("t_hit", "<f4"), ("geometry_id", "<u4"), ("primitive_id", "<u4"), ("u", "<f4"),
+                      ("v", "<f4"), ("ng", "<f4", (3,))])
+
+
+def run(cmd):
+    r = subprocess.run(cmd, capture_output=True, text=True)
+    if r.returncode != 0:
+        sys.exit(f"failed: {' '.join(cmd)}\n{r.stderr}")
+    return r.stdout
+
+
+def read_store_triangles(store):
+    """Triangles and ids in brick-file order, from the self-describing brick headers."""
+    data = np.fromfile(os.path.join(store, "bricks.dat"), dtype=np.uint8)
+    tris, ids, offset = [], [], 0
+    while offset + 32 <= data.size:
+        header = data[offset:offset + 32]
+        if bytes(header[:7]) != b"OCBRICK":
+            offset += 4096
+            continue
+        count = int(header[12:16].view("<u4")[0])
+        body = offset + 32
+        tris.append(data[body:body + count * 36].view("<f4").reshape(count, 9))
+        ids.append(data[body + count * 36:body + count * 44].view("<u4").reshape(count, 2))
+        offset = (body + count * 44 + 4095) // 4096 * 4096
+    return np.concatenate(tris), np.concatenate(ids)
+
+
+def open3d_cast(tris, rays, runs):
+    import open3d as o3d
+    scene = o3d.t.geometry.RaycastingScene()
+    vertices = o3d.core.Tensor(np.ascontiguousarray(tris.reshape(-1, 3)))
+    indices = o3d.core.Tensor(np.arange(tris.shape[0] * 3, dtype=np.uint32).reshape(-1, 3))
+    scene.add_triangles(vertices, indices)
+    rays_t = o3d.core.Tensor(rays)
+    times, result = [], None
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        result = scene.cast_rays(rays_t, nthreads=2)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), result["primitive_ids"].numpy()
+
+
+def outcore_trace(store, rays_path, out, runs, extra):
+    stats_path = out + ".stats.json"
+    run([OUTCORE, "trace", store, "--rays", rays_path, "-o", out, "--threads", "2", "--repeat", str(runs),
+         "--stats-json", stats_path] + extra)
+    with open(stats_path) as f:
+        stats = json.load(f)
+    stats = stats if isinstance(stats, list) else [stats]
+    return stats[0]["seconds"]["total"], statistics.median(s["seconds"]["total"] for s in stats[1:]), stats
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--runs", type=int, default=6)
+    ap.add_argument("--rays", type=int, default=1_000_000)
+    ap.add_argument("--scenes", default="bunny,city")
+    ap.add_argument("--work", default=os.path.join(ROOT, "build", "bench-trace"))
+    a = ap.parse_args()
+    os.makedirs(a.work, exist_ok=True)
+    rows = []
+    for name in a.scenes.split(","):
+        store = os.path.join(a.work, name + ".oc")
+        if not os.path.isdir(store):
+            print(f"packing {name}", flush=True)
+            run([OUTCORE, "pack", *SCENES[name], "-o", store, "-q"])
+        info = os.path.join(a.work, name + ".json")
+        with open(info, "w") as f:
+            f.write(run([OUTCORE, "info", store, "--json"]))
+        tris, ids = read_store_triangles(store)
+        for kind in ["incoherent", "camera"]:
+            rays_path = os.path.join(a.work, f"{name}-{kind}.npy")
+            run([sys.executable, os.path.join(ROOT, "bench", "make_rays.py"), info, kind, str(a.rays), rays_path])
+            rays = np.load(rays_path)
+            out = os.path.join(a.work, f"{name}-{kind}-hits.npy")
+            cold, warm, _ = outcore_trace(store, rays_path, out, a.runs, [])
+            _, warm_noreorder, _ = outcore_trace(store, rays_path, out + ".noreorder.npy", min(a.runs, 3),
+                                                 ["--no-reorder"])
+            o3d_s, o3d_prims = open3d_cast(tris, rays, a.runs)
+            hits = np.load(out)
+            o3d_hit = o3d_prims != 0xFFFFFFFF
+            ours_hit = hits["primitive_id"] != 0xFFFFFFFF
+            mapped = np.where(o3d_hit, ids[np.minimum(o3d_prims, len(ids) - 1), 1], 0xFFFFFFFF)
+            mapped_g = np.where(o3d_hit, ids[np.minimum(o3d_prims, len(ids) - 1), 0], 0xFFFFFFFF)
+            agree = np.mean((o3d_hit == ours_hit) & (~ours_hit | ((mapped == hits["primitive_id"]) &
+                                                                  (mapped_g == hits["geometry_id"]))))
+            n = len(rays)
+            row = dict(scene=name, triangles=len(tris), rays=kind, outcore_warm_Mrays=n / warm / 1e6,
+                       open3d_Mrays=n / o3d_s / 1e6, ratio=o3d_s / warm, noreorder_Mrays=n / warm_noreorder / 1e6,
+                       cold_s=cold, agreement=agree)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    print("\n| scene | triangles | rays | outcore warm M rays/s | Open3D M rays/s | ratio | no-reorder M rays/s "
+          "| cold run s (first answer) | agreement |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['scene']} | {r['triangles']:,} | {r['rays']} | {r['outcore_warm_Mrays']:.2f} | "
+              f"{r['open3d_Mrays']:.2f} | {r['ratio']:.2f} | {r['noreorder_Mrays']:.2f} | {r['cold_s']:.2f} | "
+              f"{r['agreement'] * 100:.3f} % |")
+
+
+if __name__ == "__main__":
+    main()
