@@ -35,7 +35,9 @@ inline BrickData load_brick_from(const std::string& spec, uint32_t geometry_id =
   return brick;
 }
 
-inline std::string bunny_path() { return std::string(OUTCORE_MODELS_DIR) + "/stanford-bunny.obj"; }
+inline std::string bunny_path() {
+  return std::string(OUTCORE_MODELS_DIR) + "/stanford-bunny.obj";
+}
 
 inline Aabb bounds_of(const BrickData& brick) {
   Aabb b;
@@ -78,7 +80,22 @@ inline BrickData random_triangles(uint64_t n, uint64_t seed) {
   BrickData out;
   for (uint32_t k = 0; k < n; ++k) {
     const Vec3f lo(0, 0, 0), hi(1, 1, 1);
-    out.triangles.push_back({random_point(rng, lo, hi), random_point(rng, lo, hi), random_point(rng, lo, hi)});
+    out.triangles.push_back(
+        {random_point(rng, lo, hi), random_point(rng, lo, hi), random_point(rng, lo, hi)});
+    out.ids.push_back({0, k});
+  }
+  return out;
+}
+
+// n small triangles (edges up to 0.01) scattered uniformly in the unit cube:
+// no spatial coherence at all, the worst case for Embree's leaf filling.
+inline BrickData scattered_triangles(uint64_t n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  BrickData out;
+  const Vec3f lo(-0.01f, -0.01f, -0.01f), hi(0.01f, 0.01f, 0.01f);
+  for (uint32_t k = 0; k < n; ++k) {
+    const Vec3f a = random_point(rng, {0, 0, 0}, {1, 1, 1});
+    out.triangles.push_back({a, a + random_point(rng, lo, hi), a + random_point(rng, lo, hi)});
     out.ids.push_back({0, k});
   }
   return out;
@@ -94,8 +111,8 @@ inline BrickData degenerate_heavy(uint64_t n, uint64_t seed) {
     const Vec3f d = random_point(rng, {-0.01f, -0.01f, -0.01f}, {0.01f, 0.01f, 0.01f});
     const Vec3f e = random_point(rng, {-0.01f, -0.01f, -0.01f}, {0.01f, 0.01f, 0.01f});
     Triangle t{a, a + d, a + e};
-    if (k % 4 == 1) t = {a, a, a + e};                  // repeated vertex
-    if (k % 4 == 3) t = {a, a + d, a + d + d};          // collinear (exact in float64? not always)
+    if (k % 4 == 1) t = {a, a, a + e};          // repeated vertex
+    if (k % 4 == 3) t = {a, a + d, a + d + d};  // collinear (exact in float64? not always)
     out.triangles.push_back(t);
     out.ids.push_back({0, k});
   }

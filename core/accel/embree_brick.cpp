@@ -3,9 +3,9 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
-#include <cstdlib>
 #include <limits>
 #include <string>
 #include <utility>
@@ -30,8 +30,9 @@ constexpr uint32_t kNoPrim = 0xffffffffu;
 // A little beyond t (2^-18 relative, about 32 float ulps). Embree accepts a
 // candidate when T <= |den| * tfar on rescaled values and reports t = T *
 // rcp(|den|), so a triangle at exactly the best t (a duplicate of the best,
-// here or in another brick) can fail a tfar of exactly t; and a node that
-// holds it can be culled by an ulp. Tracing up to widen(t) lets every such
+// here or in another brick) can fail a tfar of exactly t (one ray in twenty
+// in the tests; a margin of 1 ulp already sufficed there); and a node that
+// holds it could be culled by an ulp. Tracing up to widen(t) lets every such
 // candidate reach the tie filter, which rejects whatever is beyond t.
 inline float widen(float t) {
   constexpr float kMargin = 0x1p-18f;
@@ -64,19 +65,70 @@ Vec3f unit_normal(const Triangle& tri) {
   return Vec3f(n / len);  // len > 0: degenerate triangles are not in the scene
 }
 
+// Rays go to Embree in chunks of kChunk (in the order given). A chunk whose
+// rays share a direction octant, whose unit directions lie within
+// kCoherentDirectionSpread of each other (per axis, about 6 degrees) and whose
+// origins lie within kCoherentOriginSpread of the brick's size — camera,
+// lidar or light-probe rays, sorted — is traced as one stream with
+// RTC_INTERSECT_CONTEXT_FLAG_COHERENT (rtcIntersect1M / rtcOccluded1M), which
+// Embree traverses as packets: measured 1.5-2x faster for 1024^2 camera rays
+// on the bunny, but 3x slower than rtcIntersect1 for incoherent rays, hence
+// the test. Any other chunk goes through rtcIntersect1 / rtcOccluded1 ray by
+// ray. Both paths give bitwise identical t, u, v (checked by the tests), and
+// ties are settled by the tie filter in both, so the answer does not depend
+// on which path a ray took, i.e. on the batch it came in.
+constexpr std::size_t kChunk = 256;
+constexpr std::size_t kCoherentMinRays = 16;
+constexpr float kCoherentDirectionSpread = 0.1f;
+constexpr float kCoherentOriginSpread = 0.1f;
+
+class ChunkCoherence {
+ public:
+  void add(const Ray& ray) {
+    const Vec3f& d = ray.direction;
+    const float inv = 1.0f / std::sqrt(dot(d, d));
+    const uint32_t octant = (d.x < 0 ? 1u : 0u) | (d.y < 0 ? 2u : 0u) | (d.z < 0 ? 4u : 0u);
+    octant_or_ |= octant;
+    octant_and_ &= octant;
+    for (int a = 0; a < 3; ++a) {
+      dir_lo_[a] = std::min(dir_lo_[a], d[a] * inv);
+      dir_hi_[a] = std::max(dir_hi_[a], d[a] * inv);
+      origin_lo_[a] = std::min(origin_lo_[a], ray.origin[a]);
+      origin_hi_[a] = std::max(origin_hi_[a], ray.origin[a]);
+    }
+    ++count_;
+  }
+  bool coherent(float brick_size) const {
+    if (count_ < kCoherentMinRays || octant_or_ != octant_and_) return false;
+    for (int a = 0; a < 3; ++a) {
+      if (!(dir_hi_[a] - dir_lo_[a] <= kCoherentDirectionSpread)) return false;
+      if (!(origin_hi_[a] - origin_lo_[a] <= kCoherentOriginSpread * brick_size)) return false;
+    }
+    return true;
+  }
+
+ private:
+  std::size_t count_ = 0;
+  uint32_t octant_or_ = 0, octant_and_ = 7;
+  float dir_lo_[3] = {2, 2, 2}, dir_hi_[3] = {-2, -2, -2};
+  float origin_lo_[3] = {kInfinity, kInfinity, kInfinity},
+        origin_hi_[3] = {-kInfinity, -kInfinity, -kInfinity};
+};
+
 }  // namespace
 
 Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& brick,
-                                                                   const EmbreeBrickConfig& config) {
+                                                                    const EmbreeBrickConfig& config) {
   const auto start = std::chrono::steady_clock::now();
   const uint64_t n = brick.triangles.size();
   const std::string what = "building brick " + std::to_string(brick.brick_id) + " (embree)";
   if (brick.ids.size() != n) {
-    return invalid_argument(what + ": " + std::to_string(n) + " triangles but " + std::to_string(brick.ids.size()) +
-                            " ids");
+    return invalid_argument(what + ": " + std::to_string(n) + " triangles but " +
+                            std::to_string(brick.ids.size()) + " ids");
   }
   if (n > kMaxTriangles) {
-    return out_of_range(what + ": " + std::to_string(n) + " triangles, at most " + std::to_string(kMaxTriangles));
+    return out_of_range(what + ": " + std::to_string(n) + " triangles, at most " +
+                        std::to_string(kMaxTriangles));
   }
   OUTCORE_ASSIGN_OR_RETURN(EmbreeDevice * device, EmbreeDevice::instance());
 
@@ -115,15 +167,16 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
   if (kept > 0) {
     EmbreeDevice::ExclusiveSection section(*device);
     RTCScene scene = rtcNewScene(device->handle());
-    RTCGeometry geometry = scene != nullptr ? rtcNewGeometry(device->handle(), RTC_GEOMETRY_TYPE_TRIANGLE) : nullptr;
+    RTCGeometry geometry =
+        scene != nullptr ? rtcNewGeometry(device->handle(), RTC_GEOMETRY_TYPE_TRIANGLE) : nullptr;
     if (geometry != nullptr) {
       rtcSetSceneFlags(scene, config.robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
       rtcSetSceneBuildQuality(scene, rtc_quality(config.quality));
       rtcSetGeometryBuildQuality(geometry, rtc_quality(config.quality));
-      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, accel->triangles_.data(), 0,
-                                 sizeof(Vec3f), 3 * n);
-      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, accel->indices_.data(), 0,
-                                 3 * sizeof(uint32_t), kept);
+      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                 accel->triangles_.data(), 0, sizeof(Vec3f), 3 * n);
+      rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, accel->indices_.data(),
+                                 0, 3 * sizeof(uint32_t), kept);
       rtcSetGeometryUserData(geometry, accel.get());
       rtcSetGeometryIntersectFilterFunction(geometry, &EmbreeBrickAccel::tie_filter);
       rtcCommitGeometry(geometry);
@@ -135,7 +188,8 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
       tbb::this_task_arena::isolate([&] { rtcCommitScene(scene); });
     }
     Status status = device->take_error(what);
-    if (status.ok() && (scene == nullptr || geometry == nullptr)) status = internal_error(what + ": Embree returned null");
+    if (status.ok() && (scene == nullptr || geometry == nullptr))
+      status = internal_error(what + ": Embree returned null");
     if (!status.ok()) {
       if (scene != nullptr) rtcReleaseScene(scene);
       return status;
@@ -161,24 +215,38 @@ uint64_t EmbreeBrickAccel::buffer_bytes() const {
          indices_.capacity() * sizeof(uint32_t);
 }
 
-uint64_t EmbreeBrickAccel::memory_bytes() const { return buffer_bytes() + embree_bytes_ + kUntrackedBytes; }
+uint64_t EmbreeBrickAccel::memory_bytes() const {
+  return buffer_bytes() + embree_bytes_ + kUntrackedBytes;
+}
 
+// reserve_bytes(n) = 32 KiB + 232 n, or 32 KiB + 264 n with spatial splits
+// (robust=0, quality=high), bounding both memory_bytes() and
+// build_peak_bytes(). Measured with EmbreeBrickMeasure.DISABLED_MemoryTable
+// (embree_brick_measure_test.cpp): bricks of 10, 100, 1e3, 1e4, 1e5 and 1e6
+// triangles cut from the bunny (tiled beyond 69,451), an icosphere, random
+// large overlapping triangles, small scattered triangles and a half-degenerate
+// soup, with all six option combinations, each built from a vector without
+// spare capacity (so the vertex copy is included). The worst build peak per
+// triangle over all shapes (buffers 56 B/tri incl. the copy's slack, plus
+// Embree's peak during commit, plus kUntrackedBytes), and the bound's ratio
+// to it:
+//
+//   n                      10      100     1e3    1e4    1e5    1e6
+//   low/medium/robust    1161    294.5   183.0  179.7  165.8  164.7  B/tri
+//     bound / worst      3.02     1.90    1.45   1.31   1.40   1.41
+//   spatial splits       1161    294.5   209.8  179.6  168.0  190.2  B/tri
+//     bound / worst      3.05     2.01    1.41   1.49   1.57   1.39
+//
+// so at least 31% above the worst observed everywhere. After the build,
+// memory_bytes() is 110-166 B/tri for n >= 1e4 (88-105 for the half-degenerate
+// soup; low quality the most, its Morton builder leaving emptier leaves).
+// Embree's bytes do not depend on the number of TBB threads: identical at
+// medium and high quality for 1 to 32 threads, within one 2 MiB block at low.
 uint64_t EmbreeBrickAccel::reserve_bytes(uint64_t triangle_count, const EmbreeBrickConfig& config) {
-  (void)config;
-  // Placeholder until measured.
-  return 64 * 1024 + triangle_count * 512;
+  constexpr uint64_t kBase = 32 * 1024;
+  const bool spatial_splits = !config.robust && config.quality == EmbreeQuality::kHigh;
+  return kBase + triangle_count * (spatial_splits ? 264 : 232);
 }
-
-namespace {
-// TUNING (temporary): thresholds from the environment.
-float env_or(const char* name, float fallback) {
-  const char* v = std::getenv(name);
-  return v != nullptr ? std::strtof(v, nullptr) : fallback;
-}
-const float kDirSpread = env_or("OC_DIR_SPREAD", 0.1f);
-const float kOriginSpread = env_or("OC_ORIGIN_SPREAD", 0.1f);
-const int kMode = static_cast<int>(env_or("OC_MODE", 0));  // 0 adaptive, 1 always single, 2 always coherent
-}  // namespace
 
 // The best hit of one ray while it is traced through this brick: t, and who
 // holds it — an Embree primID of this brick, or (prim == kNoPrim) the hit the
@@ -216,7 +284,8 @@ void EmbreeBrickAccel::tie_filter(const RTCFilterFunctionNArguments* args) {
     const uint32_t prim = RTCHitN_primID(args->hit, n, lane);
     TieRecord& best = records[RTCRayN_id(args->ray, n, lane)];
     bool better = t < best.t;
-    if (t == best.t) better = self->key_of(prim) < (best.prim != kNoPrim ? self->key_of(best.prim) : best.key);
+    if (t == best.t)
+      better = self->key_of(prim) < (best.prim != kNoPrim ? self->key_of(best.prim) : best.key);
     if (!better) {
       args->valid[lane] = 0;
       continue;
@@ -229,80 +298,65 @@ void EmbreeBrickAccel::tie_filter(const RTCFilterFunctionNArguments* args) {
 
 void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
   if (scene_ == nullptr) return;
-  constexpr std::size_t kChunk = 256;
   TieRecord records[kChunk];
+  RTCRayHit found[kChunk];
+  uint32_t found_ray[kChunk];
   TieContext incoherent{{}, records};
   rtcInitIntersectContext(&incoherent.rtc);  // RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
   TieContext coherent{{}, records};
   rtcInitIntersectContext(&coherent.rtc);
   coherent.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  const float origin_limit = kOriginSpread * max_extent_;
-  RTCRayHit found[kChunk];
-  uint32_t found_ray[kChunk];
   for (std::size_t begin = 0; begin < ray_ids.size(); begin += kChunk) {
     const std::size_t end = std::min(ray_ids.size(), begin + kChunk);
     std::size_t count = 0;
-    float dlo[3] = {2, 2, 2}, dhi[3] = {-2, -2, -2};
-    float olo[3] = {kInfinity, kInfinity, kInfinity}, ohi[3] = {-kInfinity, -kInfinity, -kInfinity};
-    uint32_t octant_or = 0, octant_and = 7;
+    ChunkCoherence coherence;
     for (std::size_t j = begin; j < end; ++j) {
       const uint32_t i = ray_ids[j];
       const Ray& ray = rays[i];
       const Hit& best = hits[i];
       const float tfar = std::min(ray.tfar, widen(best.t));
       if (!(tfar > ray.tnear)) continue;  // nothing in (tnear, tfar] can improve it
-      records[count] = {best.t, kNoPrim, best.is_hit() ? id_key(best.geometry_id, best.primitive_id) : ~uint64_t{0}};
+      records[count] = {best.t, kNoPrim,
+                        best.is_hit() ? id_key(best.geometry_id, best.primitive_id) : ~uint64_t{0}};
       RTCRayHit& rayhit = found[count];
       fill_ray(ray, tfar, rayhit.ray);
-      rayhit.ray.id = static_cast<uint32_t>(count);
+      rayhit.ray.id = static_cast<uint32_t>(count);  // the filter's index into records
       rayhit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
       rayhit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
       found_ray[count++] = i;
-      const Vec3f& d = ray.direction;
-      const float inv = 1.0f / std::sqrt(dot(d, d));
-      const uint32_t octant = (d.x < 0 ? 1u : 0u) | (d.y < 0 ? 2u : 0u) | (d.z < 0 ? 4u : 0u);
-      octant_or |= octant;
-      octant_and &= octant;
-      for (int a = 0; a < 3; ++a) {
-        dlo[a] = std::min(dlo[a], d[a] * inv);
-        dhi[a] = std::max(dhi[a], d[a] * inv);
-        olo[a] = std::min(olo[a], ray.origin[a]);
-        ohi[a] = std::max(ohi[a], ray.origin[a]);
-      }
+      coherence.add(ray);
     }
-    float dspread = 0, ospread = 0;
-    for (int a = 0; a < 3; ++a) {
-      dspread = std::max(dspread, dhi[a] - dlo[a]);
-      ospread = std::max(ospread, ohi[a] - olo[a]);
-    }
-    const bool is_coherent = kMode == 2 || (kMode == 0 && count >= 16 && octant_or == octant_and &&
-                                            dspread <= kDirSpread && ospread <= origin_limit);
-    if (is_coherent) {
+    if (coherence.coherent(max_extent_)) {
       rtcIntersect1M(scene_, &coherent.rtc, found, static_cast<unsigned>(count), sizeof(RTCRayHit));
+      coherent_rays_.fetch_add(count, std::memory_order_relaxed);
+      for (std::size_t c = 0; c < count; ++c) prefetch_hit(records[c].prim);
       write_hits(found, records, found_ray, 0, count, hits);
       continue;
     }
-    // Incoherent: one ray at a time; a hit's id and vertices (random accesses
-    // into arrays of megabytes) are prefetched as soon as it is found and read
-    // once a window of rays is traced, so those cache misses overlap with the
-    // next rays' traversal instead of stalling each ray.
+    // One ray at a time; a hit's id and vertices (random accesses into arrays
+    // of megabytes) are prefetched as soon as it is found and read once a
+    // window of rays is traced, so those cache misses overlap with the next
+    // rays' traversal instead of stalling each ray.
     constexpr std::size_t kWindow = 32;
     for (std::size_t w = 0; w < count; w += kWindow) {
       const std::size_t w_end = std::min(count, w + kWindow);
       for (std::size_t c = w; c < w_end; ++c) {
         rtcIntersect1(scene_, &incoherent.rtc, &found[c]);
-        const uint32_t prim = records[c].prim;
-        if (prim == kNoPrim) continue;
-        if (prim_is_triangle_) {
-          __builtin_prefetch(&ids_[prim]);
-          __builtin_prefetch(&triangles_[prim]);
-          __builtin_prefetch(reinterpret_cast<const char*>(&triangles_[prim]) + sizeof(Triangle) - 1);
-        } else {
-          __builtin_prefetch(&indices_[3 * prim]);
-        }
+        prefetch_hit(records[c].prim);
       }
       write_hits(found, records, found_ray, w, w_end, hits);
     }
+  }
+}
+
+inline void EmbreeBrickAccel::prefetch_hit(uint32_t prim) const {
+  if (prim == kNoPrim) return;
+  if (prim_is_triangle_) {
+    __builtin_prefetch(&ids_[prim]);
+    __builtin_prefetch(&triangles_[prim]);
+    __builtin_prefetch(reinterpret_cast<const char*>(&triangles_[prim]) + sizeof(Triangle) - 1);
+  } else {
+    __builtin_prefetch(&indices_[3 * prim]);
   }
 }
 
@@ -311,6 +365,7 @@ void EmbreeBrickAccel::write_hits(const RTCRayHit* found, const TieRecord* recor
   for (std::size_t c = begin; c < end; ++c) {
     const TieRecord& record = records[c];
     if (record.prim == kNoPrim) continue;  // nothing here beats what the ray had
+    assert(found[c].hit.primID == record.prim);
     const uint32_t k = triangle_of(record.prim);
     Hit& best = hits[found_ray[c]];
     best.t = record.t;
@@ -324,16 +379,34 @@ void EmbreeBrickAccel::write_hits(const RTCRayHit* found, const TieRecord* recor
 
 void EmbreeBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
   if (scene_ == nullptr) return;
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  RTCRay rtc_ray;
-  for (const uint32_t i : ray_ids) {
-    if (occluded[i] != 0) continue;
-    const Ray& ray = rays[i];
-    if (!(ray.tfar > ray.tnear)) continue;
-    fill_ray(ray, ray.tfar, rtc_ray);
-    rtcOccluded1(scene_, &context, &rtc_ray);
-    if (rtc_ray.tfar == -std::numeric_limits<float>::infinity()) occluded[i] = 1;
+  RTCRay found[kChunk];
+  uint32_t found_ray[kChunk];
+  RTCIntersectContext incoherent;
+  rtcInitIntersectContext(&incoherent);
+  RTCIntersectContext coherent;
+  rtcInitIntersectContext(&coherent);
+  coherent.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  for (std::size_t begin = 0; begin < ray_ids.size(); begin += kChunk) {
+    const std::size_t end = std::min(ray_ids.size(), begin + kChunk);
+    std::size_t count = 0;
+    ChunkCoherence coherence;
+    for (std::size_t j = begin; j < end; ++j) {
+      const uint32_t i = ray_ids[j];
+      const Ray& ray = rays[i];
+      if (occluded[i] != 0 || !(ray.tfar > ray.tnear)) continue;
+      fill_ray(ray, ray.tfar, found[count]);
+      found_ray[count++] = i;
+      coherence.add(ray);
+    }
+    if (coherence.coherent(max_extent_)) {
+      rtcOccluded1M(scene_, &coherent, found, static_cast<unsigned>(count), sizeof(RTCRay));
+      coherent_rays_.fetch_add(count, std::memory_order_relaxed);
+    } else {
+      for (std::size_t c = 0; c < count; ++c) rtcOccluded1(scene_, &incoherent, &found[c]);
+    }
+    for (std::size_t c = 0; c < count; ++c) {
+      if (found[c].tfar == -kInfinity) occluded[found_ray[c]] = 1;  // Embree's mark for "blocked"
+    }
   }
 }
 

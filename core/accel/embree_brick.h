@@ -14,22 +14,37 @@
 // reference can never hit. The TriangleId array maps Embree's primID (via the
 // index buffer) to the user's (geometry_id, primitive_id).
 //
-// Hits. intersect() follows Embree's segment rule: a hit at t counts when
-// tnear < t <= tfar. It traces each ray over [tnear, min(tfar, hits[i].t +
-// margin)], where the margin (2^-18 relative, about 32 float ulps) lets a
-// triangle at exactly hits[i].t — a duplicate of the current best in another
-// brick — reach hit_is_better() even though Embree compares t <= tfar on
-// rescaled values; so ties between bricks are settled by the tie rule, never by
-// the order bricks are visited in. Within one brick, triangles at bitwise equal
-// t (duplicates) are settled by Embree's traversal order, deterministically.
-// Written per accepted hit: t (Embree's), the user's ids, Embree's u, v (p =
-// (1-u-v) v0 + u v1 + v v2) and the unit geometric normal computed in float64
-// from the stored vertices as normalize(cross(v1 - v0, v2 - v0)), rounded to
-// float. This is Embree's sign convention (its Ng is cross(e2, e1) with e1 =
-// v0 - v1, e2 = v2 - v0, which equals cross(v1 - v0, v2 - v0)) and therefore
-// Open3D's (primitive_normals = Embree's Ng normalised): the normal points to
-// the side from which the triangle's vertices appear counter-clockwise,
-// whichever side the ray comes from.
+// Hits. A hit at t counts when tnear < t <= tfar (Embree's segment rule).
+// intersect() traces each ray over (tnear, min(tfar, widen(hits[i].t))],
+// widen(t) being t plus 2^-18 relative (about 32 float ulps), and decides in
+// an Embree intersection filter (tie_filter) which candidates to accept: only
+// those that beat the ray's best so far by hit_is_better()'s rule (nearer, or
+// as near with a smaller (geometry_id, primitive_id)), the best starting as
+// the hit the ray brought from other bricks. So ties are settled by the rule,
+// never by the order bricks are visited in nor by Embree's traversal order —
+// also between duplicate triangles inside one brick. The widening is needed
+// because Embree tests T <= |den| * tfar on rescaled values and reports t = T
+// * rcp(|den|): a duplicate at exactly the best t fails tfar = t for about
+// one ray in twenty (measured), so without it the winner of a tie would
+// depend on which brick came first (see TiesAcrossBricksFollowTheTieRule).
+//
+// Written per improved ray: t (Embree's float t), the user's ids, Embree's
+// u, v (p = (1-u-v) v0 + u v1 + v v2) and the unit geometric normal computed
+// in float64 from the stored vertices as normalize(cross(v1 - v0, v2 - v0)),
+// rounded to float. That is Embree's sign convention — its Ng is cross(e2, e1)
+// with e1 = v0 - v1, e2 = v2 - v0, i.e. cross(v1 - v0, v2 - v0), checked in
+// NormalFollowsEmbreeNgSign — and therefore Open3D's (its primitive_normals
+// are Embree's Ng normalised): the normal points to the side from which the
+// vertices appear counter-clockwise, whichever side the ray comes from.
+// Embree's u, v lose accuracy with the ray origin's distance over the
+// triangle's size (about 1.5e-4 at a ratio of 300).
+//
+// Paths. Rays go to Embree in chunks of 256 in the order given: a chunk of
+// coherent rays (same direction octant, directions within ~6 degrees, origins
+// close) as one rtcIntersect1M / rtcOccluded1M stream with the coherent flag
+// (about 1.5-2x faster for camera rays), any other ray by rtcIntersect1 /
+// rtcOccluded1. Both give bitwise equal results (tested), so a ray's answer
+// does not depend on the batch it came in.
 //
 // Memory. memory_bytes() = the capacities of the triangle, id and index
 // buffers + the bytes Embree's memory monitor attributed to this scene (see
@@ -47,6 +62,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -61,17 +77,18 @@ namespace outcore {
 enum class EmbreeQuality {
   kLow,     // Morton-code builder: fastest build, slowest traversal
   kMedium,  // binned SAH
-  kHigh,    // binned SAH with spatial splits: slowest build, fastest traversal
+  kHigh,    // binned SAH with spatial splits (not with robust): slowest build
 };
 
 struct EmbreeBrickConfig {
   // RTC_SCENE_FLAG_ROBUST: Embree avoids optimisations that lose accuracy
-  // (watertight edge tests, vertex-based leaves). Default off: a little
-  // faster, and the tests against the float64 reference pass either way.
+  // (watertight edge tests; no spatial splits, so quality high builds like
+  // medium). Default off: 10-20% faster traversal, and the tests against
+  // the float64 reference pass either way.
   bool robust = false;
-  // RTC_BUILD_QUALITY_*. Default high: see brick_accel_factory.cpp for the
+  // RTC_BUILD_QUALITY_*. Default medium: see brick_accel_factory.cpp for the
   // measurement that chose it.
-  EmbreeQuality quality = EmbreeQuality::kHigh;
+  EmbreeQuality quality = EmbreeQuality::kMedium;
 };
 
 class EmbreeBrickAccel final : public BrickAccel {
@@ -79,14 +96,15 @@ class EmbreeBrickAccel final : public BrickAccel {
   // Largest brick: Embree's index buffer holds 3n uint32 vertex indices.
   static constexpr uint64_t kMaxTriangles = 0x55555554u;
   // Bytes Embree allocates per scene without reporting them to the monitor
-  // (Scene, TriangleMesh, BVH headers, task-group state; measured with
-  // mallinfo2 at about 7 KiB per scene), plus this object; counted in
-  // memory_bytes() with margin.
-  static constexpr uint64_t kUntrackedBytes = 12 * 1024;
+  // (Scene, TriangleMesh, BVH headers, task-group state; 3.0-4.3 KiB per
+  // scene measured with mallinfo2, EmbreeBrickMeasure.DISABLED_UntrackedBytes),
+  // plus this object; counted in memory_bytes() with margin.
+  static constexpr uint64_t kUntrackedBytes = 8 * 1024;
 
   // Consumes the brick. INVALID_ARGUMENT when ids and triangles differ in
   // count, OUT_OF_RANGE beyond kMaxTriangles, Embree's errors as Status.
-  static Expected<std::unique_ptr<EmbreeBrickAccel>> build(BrickData&& brick, const EmbreeBrickConfig& config);
+  static Expected<std::unique_ptr<EmbreeBrickAccel>> build(BrickData&& brick,
+                                                           const EmbreeBrickConfig& config);
   // Upper bound on memory_bytes() and build_peak_bytes() of a brick of n
   // triangles built with `config`.
   static uint64_t reserve_bytes(uint64_t triangle_count, const EmbreeBrickConfig& config);
@@ -112,6 +130,8 @@ class EmbreeBrickAccel final : public BrickAccel {
   // Peak during build(): bytes of the consumed brick still alive, our buffers,
   // and Embree's peak during the commit, plus kUntrackedBytes.
   uint64_t build_peak_bytes() const { return build_peak_bytes_; }
+  // Rays (closest and any hit) that went to Embree in coherent streams.
+  uint64_t coherent_rays() const { return coherent_rays_.load(std::memory_order_relaxed); }
 
  private:
   EmbreeBrickAccel() = default;
@@ -119,23 +139,25 @@ class EmbreeBrickAccel final : public BrickAccel {
   struct TieContext;
   static void tie_filter(const RTCFilterFunctionNArguments* args);
   uint64_t buffer_bytes() const;
-  void write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray, std::size_t begin,
-                  std::size_t end, Hit* hits) const;
+  void prefetch_hit(uint32_t prim) const;
+  void write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
+                  std::size_t begin, std::size_t end, Hit* hits) const;
   // The brick triangle behind Embree's primID, and its user id as one key.
   uint32_t triangle_of(uint32_t prim) const { return prim_is_triangle_ ? prim : indices_[3 * prim] / 3; }
   uint64_t key_of(uint32_t prim) const;
 
   EmbreeBrickConfig config_;
   uint32_t brick_id_ = 0;
-  RTCScene scene_ = nullptr;  // null for a brick without non-degenerate triangles
+  RTCScene scene_ = nullptr;         // null for a brick without non-degenerate triangles
   std::vector<Triangle> triangles_;  // Embree's vertex buffer; capacity > size
   std::vector<TriangleId> ids_;      // ids_[k] names triangles_[k]
   std::vector<uint32_t> indices_;    // Embree's index buffer; capacity > size
   bool prim_is_triangle_ = true;     // no degenerate left out: primID == k
-  float max_extent_ = 0;             // largest side of the brick's bounds
+  float max_extent_ = 0;             // largest side of the brick's bounds (coherence test)
   uint64_t embree_bytes_ = 0;
   uint64_t build_peak_bytes_ = 0;
   double build_seconds_ = 0;
+  mutable std::atomic<uint64_t> coherent_rays_{0};
 };
 
 class EmbreeBrickBuilder final : public BrickBuilder {

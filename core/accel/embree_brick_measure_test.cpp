@@ -5,11 +5,13 @@
 #include <gtest/gtest.h>
 #include <malloc.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
-#include <ctime>
 #include <cstdio>
+#include <cstdlib>
+#include <ctime>
 #include <map>
 #include <memory>
 #include <string>
@@ -41,12 +43,21 @@ std::vector<EmbreeBrickConfig> all_configs() {
 // Peak and final bytes per triangle for every shape, size and option
 // combination; prints the worst ratios per configuration.
 TEST(EmbreeBrickMeasure, DISABLED_MemoryTable) {
+  // OUTCORE_MEASURE_THREADS=k limits TBB (Embree's builders) to k threads.
+  const char* threads = std::getenv("OUTCORE_MEASURE_THREADS");
+  tbb::global_control limit(
+      tbb::global_control::max_allowed_parallelism,
+      threads != nullptr ? std::stoul(threads) : tbb::this_task_arena::max_concurrency());
   const BrickData bunny = load_brick_from(bunny_path());
   const BrickData sphere = load_brick_from("gen:sphere?level=8");
   const BrickData random = random_triangles(1000000, 7);
   const BrickData degenerate = degenerate_heavy(1000000, 9);
-  const std::vector<std::pair<std::string, const BrickData*>> shapes = {
-      {"bunny", &bunny}, {"sphere", &sphere}, {"random", &random}, {"degenerate", &degenerate}};
+  const BrickData scattered = scattered_triangles(1000000, 11);
+  const std::vector<std::pair<std::string, const BrickData*>> shapes = {{"bunny", &bunny},
+                                                                        {"sphere", &sphere},
+                                                                        {"random", &random},
+                                                                        {"scattered", &scattered},
+                                                                        {"degenerate", &degenerate}};
   std::map<std::string, std::pair<double, double>> worst;  // config -> (peak/n, final/n) for n >= 1000
   std::printf("%-10s %8s %-6s %-6s %12s %12s %12s %9s %9s %8s\n", "shape", "n", "robust", "qual", "embree",
               "memory", "peak", "mem/n", "peak/n", "secs");
@@ -62,7 +73,8 @@ TEST(EmbreeBrickMeasure, DISABLED_MemoryTable) {
                     (unsigned long long)n, config.robust, quality_name(config.quality),
                     (unsigned long long)a.embree_bytes(), (unsigned long long)a.memory_bytes(),
                     (unsigned long long)a.build_peak_bytes(), mem_n, peak_n, a.build_seconds());
-        const std::string key = std::string(config.robust ? "robust " : "fast ") + quality_name(config.quality);
+        const std::string key =
+            std::string(config.robust ? "robust " : "fast ") + quality_name(config.quality);
         auto& w = worst[key];
         if (n >= 1000) w = {std::max(w.first, peak_n), std::max(w.second, mem_n)};
         EXPECT_LE(a.memory_bytes(), EmbreeBrickAccel::reserve_bytes(n, config));
@@ -70,7 +82,8 @@ TEST(EmbreeBrickMeasure, DISABLED_MemoryTable) {
       }
     }
   }
-  for (const auto& [key, w] : worst) std::printf("worst (n>=1000) %-14s peak/n %.1f  final/n %.1f\n", key.c_str(), w.first, w.second);
+  for (const auto& [key, w] : worst)
+    std::printf("worst (n>=1000) %-14s peak/n %.1f  final/n %.1f\n", key.c_str(), w.first, w.second);
 }
 
 // Heap bytes per scene that Embree allocates without reporting them to the
@@ -81,7 +94,8 @@ TEST(EmbreeBrickMeasure, DISABLED_UntrackedBytes) {
   for (const auto& config : all_configs()) {
     std::vector<std::unique_ptr<EmbreeBrickAccel>> keep;
     // Warm up thread-local state first.
-    for (int i = 0; i < 50; ++i) keep.push_back(std::move(EmbreeBrickAccel::build(resized(sphere, 80), config).value()));
+    for (int i = 0; i < 50; ++i)
+      keep.push_back(std::move(EmbreeBrickAccel::build(resized(sphere, 80), config).value()));
     keep.clear();
     const auto before = mallinfo2();
     uint64_t accounted = 0;
@@ -122,8 +136,9 @@ double mrays_per_second(const EmbreeBrickAccel& accel, const std::vector<Ray>& r
 // scene of the same triangles: the peer our per-ray overhead is measured
 // against.
 RTCBuildQuality rtc_quality(EmbreeQuality q) {
-  return q == EmbreeQuality::kLow ? RTC_BUILD_QUALITY_LOW
-                                  : (q == EmbreeQuality::kMedium ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
+  return q == EmbreeQuality::kLow
+             ? RTC_BUILD_QUALITY_LOW
+             : (q == EmbreeQuality::kMedium ? RTC_BUILD_QUALITY_MEDIUM : RTC_BUILD_QUALITY_HIGH);
 }
 
 double raw_embree_mrays_per_second(const BrickData& brick, const EmbreeBrickConfig& config,
@@ -154,8 +169,18 @@ double raw_embree_mrays_per_second(const BrickData& brick, const EmbreeBrickConf
   for (int r = 0; r < repeats; ++r) {
     for (std::size_t i = 0; i < rays.size(); ++i) {
       const Ray& ray = rays[i];
-      rayhits[i].ray = {ray.origin.x, ray.origin.y, ray.origin.z, ray.tnear, ray.direction.x, ray.direction.y,
-                        ray.direction.z, 0.0f, ray.tfar, 0xffffffffu, 0, 0};
+      rayhits[i].ray = {ray.origin.x,
+                        ray.origin.y,
+                        ray.origin.z,
+                        ray.tnear,
+                        ray.direction.x,
+                        ray.direction.y,
+                        ray.direction.z,
+                        0.0f,
+                        ray.tfar,
+                        0xffffffffu,
+                        0,
+                        0};
       rayhits[i].hit.geomID = RTC_INVALID_GEOMETRY_ID;
     }
     RTCIntersectContext context;
@@ -188,11 +213,12 @@ TEST(EmbreeBrickMeasure, DISABLED_TraceSpeed) {
       ours = std::max(ours, mrays_per_second(*accel, rays, ids, 1));
       raw = std::max(raw, raw_embree_mrays_per_second(bunny, config, rays, 1));
     }
-    std::printf("robust=%d quality=%-6s build %.3f s (1 thread)  intersect %.2f M rays/s, plain loop %.2f, ratio %.2f\n",
-                config.robust, quality_name(config.quality), build, ours, raw, ours / raw);
+    std::printf(
+        "robust=%d quality=%-6s build %.3f s (1 thread)  intersect %.2f M rays/s, plain loop %.2f, ratio "
+        "%.2f\n",
+        config.robust, quality_name(config.quality), build, ours, raw, ours / raw);
   }
 }
-
 
 // Morton code of a point in [0,1)^3, 10 bits per axis.
 uint32_t morton3(float x, float y, float z) {
@@ -238,7 +264,8 @@ std::vector<Ray> camera_rays(const Aabb& b, int width, int height) {
     for (int tx = 0; tx < width; tx += 4) {
       for (int y = ty; y < ty + 4; ++y) {
         for (int x = tx; x < tx + 4; ++x) {
-          const Vec3f target = c + Vec3f((x / float(width) - 0.5f) * 1.2f * e.x, (y / float(height) - 0.5f) * 1.2f * e.y, 0);
+          const Vec3f target =
+              c + Vec3f((x / float(width) - 0.5f) * 1.2f * e.x, (y / float(height) - 0.5f) * 1.2f * e.y, 0);
           Ray r;
           r.origin = eye;
           r.direction = target - eye;
@@ -263,7 +290,18 @@ double packet_mrays_per_second(RTCScene scene, const std::vector<Ray>& rays, int
   if (mode == 0) {
     RTCRayHit rh;
     for (const Ray& ray : rays) {
-      rh.ray = {ray.origin.x, ray.origin.y, ray.origin.z, ray.tnear, ray.direction.x, ray.direction.y, ray.direction.z, 0.0f, ray.tfar, 0xffffffffu, 0, 0};
+      rh.ray = {ray.origin.x,
+                ray.origin.y,
+                ray.origin.z,
+                ray.tnear,
+                ray.direction.x,
+                ray.direction.y,
+                ray.direction.z,
+                0.0f,
+                ray.tfar,
+                0xffffffffu,
+                0,
+                0};
       rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
       rtcIntersect1(scene, &context, &rh);
       hits += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
@@ -276,10 +314,18 @@ double packet_mrays_per_second(RTCScene scene, const std::vector<Ray>& rays, int
         const std::size_t i = b + l;
         valid[l] = i < rays.size() ? -1 : 0;
         const Ray& ray = rays[std::min(i, rays.size() - 1)];
-        p.ray.org_x[l] = ray.origin.x; p.ray.org_y[l] = ray.origin.y; p.ray.org_z[l] = ray.origin.z;
-        p.ray.dir_x[l] = ray.direction.x; p.ray.dir_y[l] = ray.direction.y; p.ray.dir_z[l] = ray.direction.z;
-        p.ray.tnear[l] = ray.tnear; p.ray.tfar[l] = ray.tfar; p.ray.time[l] = 0; p.ray.mask[l] = 0xffffffffu;
-        p.ray.id[l] = 0; p.ray.flags[l] = 0;
+        p.ray.org_x[l] = ray.origin.x;
+        p.ray.org_y[l] = ray.origin.y;
+        p.ray.org_z[l] = ray.origin.z;
+        p.ray.dir_x[l] = ray.direction.x;
+        p.ray.dir_y[l] = ray.direction.y;
+        p.ray.dir_z[l] = ray.direction.z;
+        p.ray.tnear[l] = ray.tnear;
+        p.ray.tfar[l] = ray.tfar;
+        p.ray.time[l] = 0;
+        p.ray.mask[l] = 0xffffffffu;
+        p.ray.id[l] = 0;
+        p.ray.flags[l] = 0;
         p.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
       }
       rtcIntersect16(valid, scene, &context, &p);
@@ -292,7 +338,18 @@ double packet_mrays_per_second(RTCScene scene, const std::vector<Ray>& rays, int
       const std::size_t n = std::min(kChunk, rays.size() - b);
       for (std::size_t l = 0; l < n; ++l) {
         const Ray& ray = rays[b + l];
-        chunk[l].ray = {ray.origin.x, ray.origin.y, ray.origin.z, ray.tnear, ray.direction.x, ray.direction.y, ray.direction.z, 0.0f, ray.tfar, 0xffffffffu, 0, 0};
+        chunk[l].ray = {ray.origin.x,
+                        ray.origin.y,
+                        ray.origin.z,
+                        ray.tnear,
+                        ray.direction.x,
+                        ray.direction.y,
+                        ray.direction.z,
+                        0.0f,
+                        ray.tfar,
+                        0xffffffffu,
+                        0,
+                        0};
         chunk[l].hit.geomID = RTC_INVALID_GEOMETRY_ID;
       }
       rtcIntersect1M(scene, &context, chunk.data(), static_cast<unsigned>(n), sizeof(RTCRayHit));
@@ -328,13 +385,17 @@ TEST(EmbreeBrickMeasure, DISABLED_PacketSpeed) {
   for (uint32_t i = 0; i < indices.size(); ++i) indices[i] = i;
   RTCScene scene = rtcNewScene((*device)->handle());
   RTCGeometry geometry = rtcNewGeometry((*device)->handle(), RTC_GEOMETRY_TYPE_TRIANGLE);
-  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices.data(), 0, 12, 3 * bunny.triangles.size());
-  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices.data(), 0, 12, bunny.triangles.size());
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vertices.data(), 0, 12,
+                             3 * bunny.triangles.size());
+  rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices.data(), 0, 12,
+                             bunny.triangles.size());
   rtcCommitGeometry(geometry);
   rtcAttachGeometry(scene, geometry);
   rtcReleaseGeometry(geometry);
   rtcCommitScene(scene);
-  for (const auto& [name, rays] : {std::pair{"random", &random}, std::pair{"sorted", &sorted}, std::pair{"camera", &camera}, std::pair{"cam256", &camera256}, std::pair{"cam128", &camera128}, std::pair{"cam64", &camera64}}) {
+  for (const auto& [name, rays] :
+       {std::pair{"random", &random}, std::pair{"sorted", &sorted}, std::pair{"camera", &camera},
+        std::pair{"cam256", &camera256}, std::pair{"cam128", &camera128}, std::pair{"cam64", &camera64}}) {
     double best[5] = {0, 0, 0, 0, 0};
     for (int r = 0; r < 3; ++r) {
       for (int mode = 0; mode < 4; ++mode) {
@@ -342,8 +403,10 @@ TEST(EmbreeBrickMeasure, DISABLED_PacketSpeed) {
       }
       best[4] = std::max(best[4], mrays_per_second(**accel, *rays, all_ids(rays->size()), 1));
     }
-    std::printf("%-7s rtcIntersect1 %.2f  rtcIntersect16 %.2f  rtcIntersect1M coherent %.2f incoherent %.2f  accel %.2f M rays/s\n",
-                name, best[0], best[1], best[2], best[3], best[4]);
+    std::printf(
+        "%-7s rtcIntersect1 %.2f  rtcIntersect16 %.2f  rtcIntersect1M coherent %.2f incoherent %.2f  accel "
+        "%.2f M rays/s\n",
+        name, best[0], best[1], best[2], best[3], best[4]);
   }
   rtcReleaseScene(scene);
 }
@@ -352,10 +415,13 @@ TEST(EmbreeBrickMeasure, DISABLED_PacketSpeed) {
 }  // namespace outcore
 namespace outcore {
 namespace {
-// For profiling (perf record): the accel alone on 1M random bunny rays, 5 times.
+// For profiling (perf record): the accel alone on 1M random bunny rays (or,
+// with OUTCORE_MEASURE_CAMERA=1, 1024^2 camera rays), 5 times.
 TEST(EmbreeBrickMeasure, DISABLED_AccelOnly) {
   const BrickData bunny = accel_test::load_brick_from(accel_test::bunny_path());
-  const auto rays = accel_test::rays_from_outside(accel_test::bounds_of(bunny), 1000000, 3);
+  const auto rays = std::getenv("OUTCORE_MEASURE_CAMERA")
+                        ? camera_rays(accel_test::bounds_of(bunny), 1024, 1024)
+                        : accel_test::rays_from_outside(accel_test::bounds_of(bunny), 1000000, 3);
   EmbreeBrickConfig config;
   config.quality = EmbreeQuality::kMedium;
   auto accel = EmbreeBrickAccel::build(BrickData(bunny), config);
@@ -368,28 +434,30 @@ TEST(EmbreeBrickMeasure, DISABLED_AccelOnly) {
 }  // namespace outcore
 namespace outcore {
 namespace {
-// Which duplicate wins inside one brick, by path (run with OC_MODE=1 and 2).
-TEST(EmbreeBrickMeasure, DISABLED_DuplicateTies) {
-  BrickData bunny = accel_test::load_brick_from(accel_test::bunny_path());
-  const std::size_t n = bunny.triangles.size();
-  for (std::size_t k = 0; k < n; ++k) {
-    bunny.triangles.push_back(bunny.triangles[k]);
-    bunny.ids.push_back({1, static_cast<uint32_t>(k)});
+// Default choice: trace speed of the candidate configurations on the bunny,
+// 1M incoherent rays, single thread, alternating 8 times (best of each).
+TEST(EmbreeBrickMeasure, DISABLED_DefaultChoice) {
+  const BrickData bunny = accel_test::load_brick_from(accel_test::bunny_path());
+  const auto rays = accel_test::rays_from_outside(accel_test::bounds_of(bunny), 1000000, 3);
+  const auto ids = accel_test::all_ids(rays.size());
+  tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+  const std::vector<EmbreeBrickConfig> configs = {
+      {false, EmbreeQuality::kLow}, {false, EmbreeQuality::kMedium}, {false, EmbreeQuality::kHigh},
+      {true, EmbreeQuality::kLow},  {true, EmbreeQuality::kMedium},  {true, EmbreeQuality::kHigh}};
+  std::vector<std::unique_ptr<EmbreeBrickAccel>> accels;
+  std::vector<double> best(configs.size(), 0.0), build(configs.size(), 1e30);
+  for (int r = 0; r < 8; ++r) {
+    for (std::size_t c = 0; c < configs.size(); ++c) {
+      auto accel = std::move(EmbreeBrickAccel::build(BrickData(bunny), configs[c]).value());
+      build[c] = std::min(build[c], accel->build_seconds());
+      best[c] = std::max(best[c], mrays_per_second(*accel, rays, ids, 1));
+    }
   }
-  const Aabb b = accel_test::bounds_of(bunny);
-  const auto rays = camera_rays(b, 256, 256);
-  auto accel = EmbreeBrickAccel::build(std::move(bunny), {});
-  ASSERT_TRUE(accel.ok());
-  std::vector<Hit> hits(rays.size());
-  (*accel)->intersect(accel_test::all_ids(rays.size()), rays.data(), hits.data());
-  uint64_t g0 = 0, g1 = 0, sum = 0;
-  for (const Hit& h : hits) {
-    if (!h.is_hit()) continue;
-    (h.geometry_id == 0 ? g0 : g1)++;
-    sum = sum * 31 + h.geometry_id;
+  for (std::size_t c = 0; c < configs.size(); ++c) {
+    std::printf("robust=%d quality=%-6s build %.3f s, intersect %.2f M rays/s, build + 1M rays %.3f s\n",
+                configs[c].robust, quality_name(configs[c].quality), build[c], best[c],
+                build[c] + 1.0 / best[c]);
   }
-  std::printf("geometry 0 wins %llu, geometry 1 wins %llu, signature %llx\n", (unsigned long long)g0,
-              (unsigned long long)g1, (unsigned long long)sum);
 }
 }  // namespace
 }  // namespace outcore

@@ -45,7 +45,8 @@ Expected<EmbreeDevice*> EmbreeDevice::instance() {
     if (d->device_ == nullptr) {
       const RTCError code = rtcGetDeviceError(nullptr);
       delete d;
-      return status_from_rtc_error(code == RTC_ERROR_NONE ? RTC_ERROR_UNKNOWN : code, "creating the Embree device");
+      return status_from_rtc_error(code == RTC_ERROR_NONE ? RTC_ERROR_UNKNOWN : code,
+                                   "creating the Embree device");
     }
     rtcSetDeviceErrorFunction(d->device_, &EmbreeDevice::error_callback, d);
     rtcSetDeviceMemoryMonitorFunction(d->device_, &EmbreeDevice::memory_monitor, d);
@@ -86,7 +87,9 @@ EmbreeDevice::ExclusiveSection::ExclusiveSection(EmbreeDevice& device)
   device_.peak_bytes_.store(start_bytes_, std::memory_order_relaxed);
 }
 
-int64_t EmbreeDevice::ExclusiveSection::delta_bytes() const { return device_.live_bytes() - start_bytes_; }
+int64_t EmbreeDevice::ExclusiveSection::delta_bytes() const {
+  return device_.live_bytes() - start_bytes_;
+}
 
 int64_t EmbreeDevice::ExclusiveSection::peak_delta_bytes() const {
   const int64_t peak = device_.peak_bytes_.load(std::memory_order_relaxed);

@@ -1,0 +1,58 @@
+#include "core/accel/embree_device.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include "core/accel/accel_test_util.h"
+#include "core/accel/embree_brick.h"
+
+namespace outcore {
+namespace {
+
+bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
+
+TEST(EmbreeDevice, IsOneDevice) {
+  auto a = EmbreeDevice::instance();
+  auto b = EmbreeDevice::instance();
+  ASSERT_TRUE(a.ok()) << a.status().to_string();
+  ASSERT_TRUE(b.ok());
+  EXPECT_EQ(*a, *b);
+  EXPECT_NE((*a)->handle(), nullptr);
+}
+
+TEST(EmbreeDevice, ErrorsBecomeStatus) {
+  auto device = EmbreeDevice::instance();
+  ASSERT_TRUE(device.ok());
+  EXPECT_TRUE((*device)->take_error("nothing").ok());
+  // An invalid call: a geometry of a type Embree does not know.
+  RTCGeometry geometry = rtcNewGeometry((*device)->handle(), static_cast<RTCGeometryType>(9999));
+  EXPECT_EQ(geometry, nullptr);
+  const Status status = (*device)->take_error("making a geometry");
+  ASSERT_FALSE(status.ok());
+  EXPECT_TRUE(contains(status.message(), "making a geometry: Embree RTC_ERROR_")) << status.message();
+  EXPECT_TRUE((*device)->take_error("again").ok()) << "taking the error clears it";
+}
+
+// The monitor's counter moves by exactly what a brick reports, up on build and
+// down on release; a section sees the build's bytes and its peak.
+TEST(EmbreeDevice, MonitorAttributesBytesToOneBrick) {
+  auto device = EmbreeDevice::instance();
+  ASSERT_TRUE(device.ok());
+  const int64_t before = (*device)->live_bytes();
+  auto accel = EmbreeBrickAccel::build(accel_test::load_brick_from("gen:sphere?level=5"), {});
+  ASSERT_TRUE(accel.ok());
+  EXPECT_EQ((*device)->live_bytes() - before, static_cast<int64_t>((*accel)->embree_bytes()));
+  EXPECT_GT((*accel)->embree_bytes(), 20480u * 32);  // BVH nodes and leaves: tens of bytes per triangle
+  accel->reset();
+  EXPECT_EQ((*device)->live_bytes(), before);
+
+  EmbreeDevice::ExclusiveSection section(**device);
+  EXPECT_EQ(section.delta_bytes(), 0);
+  EXPECT_EQ(section.peak_delta_bytes(), 0);
+}
+
+}  // namespace
+}  // namespace outcore
