@@ -67,16 +67,17 @@ inline Vec3d reference_unit_normal(const Triangle& tri) {
 }
 
 // Closest hit over all triangles (ids[k] names triangles[k]).
-inline ReferenceHit reference_closest_hit(std::span<const Triangle> triangles, std::span<const TriangleId> ids,
-                                          const Ray& ray) {
+inline ReferenceHit reference_closest_hit(std::span<const Triangle> triangles,
+                                          std::span<const TriangleId> ids, const Ray& ray) {
   ReferenceHit best;
   for (std::size_t k = 0; k < triangles.size(); ++k) {
     const auto h = reference_triangle_hit(triangles[k], ray);
     if (!h) continue;
     const TriangleId id = ids[k];
-    const bool better = h->t != best.t ? h->t < best.t
-                                       : (id.geometry_id != best.geometry_id ? id.geometry_id < best.geometry_id
-                                                                             : id.primitive_id < best.primitive_id);
+    const bool better = h->t != best.t
+                            ? h->t < best.t
+                            : (id.geometry_id != best.geometry_id ? id.geometry_id < best.geometry_id
+                                                                  : id.primitive_id < best.primitive_id);
     if (!better) continue;
     best.t = h->t;
     best.geometry_id = id.geometry_id;
