@@ -225,7 +225,7 @@ Expected<std::vector<Hit>> read_hits_npy(const std::string& path) {
   }
   OUTCORE_ASSIGN_OR_RETURN(std::string_view data, array_data(bytes, path, header, sizeof(Hit)));
   std::vector<Hit> hits(header.shape[0]);
-  std::memcpy(hits.data(), data.data(), data.size());
+  if (!data.empty()) std::memcpy(hits.data(), data.data(), data.size());
   return hits;
 }
 
