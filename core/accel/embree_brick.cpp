@@ -147,15 +147,27 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
     peak = std::max(peak, brick.memory_bytes() + accel->triangles_.capacity() * sizeof(Triangle));
   }
   brick.triangles = {};
-  accel->ids_ = std::move(brick.ids);
 
-  // Index buffer over the non-degenerate triangles, again with slack.
+  // What a hit reports besides t, u, v, per triangle in one 20-byte record:
+  // one cache miss per hit instead of one for the id and two for the vertices.
+  accel->hit_records_.resize(n);
+  for (uint64_t k = 0; k < n; ++k) {
+    const Triangle& tri = accel->triangles_[k];
+    accel->hit_records_[k] = {tri.is_degenerate() ? Vec3f() : unit_normal(tri), brick.ids[k].geometry_id,
+                              brick.ids[k].primitive_id};
+  }
+  peak = std::max(peak, brick.memory_bytes() + accel->buffer_bytes());
+  brick.ids = {};
+
+  // Index buffer over the non-degenerate triangles (those with a normal),
+  // again with slack.
+  const auto degenerate = [&](uint64_t k) { return accel->hit_records_[k].normal == Vec3f(); };
   uint64_t kept = 0;
-  for (const Triangle& tri : accel->triangles_) kept += tri.is_degenerate() ? 0 : 1;
+  for (uint64_t k = 0; k < n; ++k) kept += degenerate(k) ? 0 : 1;
   accel->prim_is_triangle_ = kept == n;
   accel->indices_.reserve(3 * kept + 1);
   for (uint32_t k = 0; k < n; ++k) {
-    if (!accel->prim_is_triangle_ && accel->triangles_[k].is_degenerate()) continue;
+    if (!accel->prim_is_triangle_ && degenerate(k)) continue;
     accel->indices_.insert(accel->indices_.end(), {3 * k, 3 * k + 1, 3 * k + 2});
   }
   peak = std::max(peak, accel->buffer_bytes());
@@ -211,7 +223,7 @@ EmbreeBrickAccel::~EmbreeBrickAccel() {
 }
 
 uint64_t EmbreeBrickAccel::buffer_bytes() const {
-  return triangles_.capacity() * sizeof(Triangle) + ids_.capacity() * sizeof(TriangleId) +
+  return triangles_.capacity() * sizeof(Triangle) + hit_records_.capacity() * sizeof(HitRecord) +
          indices_.capacity() * sizeof(uint32_t);
 }
 
@@ -219,7 +231,7 @@ uint64_t EmbreeBrickAccel::memory_bytes() const {
   return buffer_bytes() + embree_bytes_ + kUntrackedBytes;
 }
 
-// reserve_bytes(n) = 32 KiB + 232 n, or 32 KiB + 264 n with spatial splits
+// reserve_bytes(n) = 32 KiB + 248 n, or 32 KiB + 280 n with spatial splits
 // (robust=0, quality=high), bounding both memory_bytes() and
 // build_peak_bytes(). Measured with EmbreeBrickMeasure.DISABLED_MemoryTable
 // (embree_brick_measure_test.cpp): bricks of 10, 100, 1e3, 1e4, 1e5 and 1e6
@@ -227,25 +239,26 @@ uint64_t EmbreeBrickAccel::memory_bytes() const {
 // large overlapping triangles, small scattered triangles and a half-degenerate
 // soup, with all six option combinations, each built from a vector without
 // spare capacity (so the vertex copy is included). The worst build peak per
-// triangle over all shapes (buffers 56 B/tri incl. the copy's slack, plus
+// triangle over all shapes (our buffers, 68 B/tri after the build, plus
 // Embree's peak during commit, plus kUntrackedBytes), and the bound's ratio
 // to it:
 //
 //   n                      10      100     1e3    1e4    1e5    1e6
-//   low/medium/robust    1161    294.5   183.0  179.7  165.8  164.7  B/tri
-//     bound / worst      3.02     1.90    1.45   1.31   1.40   1.41
-//   spatial splits       1161    294.5   209.8  179.6  168.0  190.2  B/tri
-//     bound / worst      3.05     2.01    1.41   1.49   1.57   1.39
+//   low/medium/robust    1173    306.5   195.0  191.7  177.8  174.6  B/tri
+//     bound / worst      3.01     1.88    1.44   1.31   1.40   1.42
+//   spatial splits       1173    306.5   221.8  191.6  180.0  202.2  B/tri
+//     bound / worst      3.03     1.98    1.41   1.48   1.56   1.38
 //
 // so at least 31% above the worst observed everywhere. After the build,
-// memory_bytes() is 110-166 B/tri for n >= 1e4 (88-105 for the half-degenerate
-// soup; low quality the most, its Morton builder leaving emptier leaves).
-// Embree's bytes do not depend on the number of TBB threads: identical at
-// medium and high quality for 1 to 32 threads, within one 2 MiB block at low.
+// memory_bytes() is 122-168 B/tri for n >= 1e4 (100-117 for the
+// half-degenerate soup; low quality the most, its Morton builder leaving
+// emptier leaves). Embree's bytes do not depend on the number of TBB threads:
+// identical at medium and high quality for 1 to 32 threads, within one 2 MiB
+// block at low.
 uint64_t EmbreeBrickAccel::reserve_bytes(uint64_t triangle_count, const EmbreeBrickConfig& config) {
   constexpr uint64_t kBase = 32 * 1024;
   const bool spatial_splits = !config.robust && config.quality == EmbreeQuality::kHigh;
-  return kBase + triangle_count * (spatial_splits ? 264 : 232);
+  return kBase + triangle_count * (spatial_splits ? 280 : 248);
 }
 
 // The best hit of one ray while it is traced through this brick: t, and who
@@ -264,8 +277,8 @@ struct EmbreeBrickAccel::TieContext {
 };
 
 uint64_t EmbreeBrickAccel::key_of(uint32_t prim) const {
-  const TriangleId id = ids_[triangle_of(prim)];
-  return id_key(id.geometry_id, id.primitive_id);
+  const HitRecord& record = hit_records_[triangle_of(prim)];
+  return id_key(record.geometry_id, record.primitive_id);
 }
 
 // Intersection filter: accepts a candidate only if it beats the ray's best by
@@ -333,28 +346,29 @@ void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* r
       write_hits(found, records, found_ray, 0, count, hits);
       continue;
     }
-    // One ray at a time; a hit's id and vertices (random accesses into arrays
-    // of megabytes) are prefetched as soon as it is found and read once a
-    // window of rays is traced, so those cache misses overlap with the next
-    // rays' traversal instead of stalling each ray.
-    constexpr std::size_t kWindow = 32;
-    for (std::size_t w = 0; w < count; w += kWindow) {
-      const std::size_t w_end = std::min(count, w + kWindow);
-      for (std::size_t c = w; c < w_end; ++c) {
-        rtcIntersect1(scene_, &incoherent.rtc, &found[c]);
-        prefetch_hit(records[c].prim);
-      }
-      write_hits(found, records, found_ray, w, w_end, hits);
+    // One ray at a time. A hit's id and vertices (random accesses into arrays
+    // of megabytes) are prefetched as soon as the ray is traced and read
+    // kLag rays later, so those cache misses overlap with the next rays'
+    // traversal instead of stalling each ray.
+    // One ray at a time. A hit's record (a random access into megabytes) is
+    // prefetched as soon as the ray is traced and read kLag rays later, so the
+    // cache miss overlaps with the next rays' traversal instead of stalling
+    // (measured: about 10% of the trace time on the bunny).
+    constexpr std::size_t kLag = 8;
+    for (std::size_t c = 0; c < count; ++c) {
+      rtcIntersect1(scene_, &incoherent.rtc, &found[c]);
+      prefetch_hit(records[c].prim);
+      if (c >= kLag) write_hits(found, records, found_ray, c - kLag, c - kLag + 1, hits);
     }
+    write_hits(found, records, found_ray, count > kLag ? count - kLag : 0, count, hits);
   }
 }
 
 inline void EmbreeBrickAccel::prefetch_hit(uint32_t prim) const {
   if (prim == kNoPrim) return;
   if (prim_is_triangle_) {
-    __builtin_prefetch(&ids_[prim]);
-    __builtin_prefetch(&triangles_[prim]);
-    __builtin_prefetch(reinterpret_cast<const char*>(&triangles_[prim]) + sizeof(Triangle) - 1);
+    __builtin_prefetch(&hit_records_[prim]);
+    __builtin_prefetch(reinterpret_cast<const char*>(&hit_records_[prim]) + sizeof(HitRecord) - 1);
   } else {
     __builtin_prefetch(&indices_[3 * prim]);
   }
@@ -369,11 +383,11 @@ void EmbreeBrickAccel::write_hits(const RTCRayHit* found, const TieRecord* recor
     const uint32_t k = triangle_of(record.prim);
     Hit& best = hits[found_ray[c]];
     best.t = record.t;
-    best.geometry_id = ids_[k].geometry_id;
-    best.primitive_id = ids_[k].primitive_id;
+    best.geometry_id = hit_records_[k].geometry_id;
+    best.primitive_id = hit_records_[k].primitive_id;
     best.u = found[c].hit.u;  // Embree keeps the last accepted candidate's: the record's
     best.v = found[c].hit.v;
-    best.normal = unit_normal(triangles_[k]);
+    best.normal = hit_records_[k].normal;
   }
 }
 

@@ -11,8 +11,11 @@
 // every triangle that is not degenerate in float64 (Triangle::is_degenerate);
 // degenerate ones are left out of the scene, which both saves BVH memory and
 // keeps Embree's float arithmetic from reporting hits on triangles the float64
-// reference can never hit. The TriangleId array maps Embree's primID (via the
-// index buffer) to the user's (geometry_id, primitive_id).
+// reference can never hit. A 20-byte record per triangle holds what a hit
+// reports besides t, u, v: the user's (geometry_id, primitive_id) and the unit
+// normal, computed at build time (so a hit costs one cache miss, not three).
+// Embree's primID maps to the triangle via the index buffer (or directly when
+// no triangle was left out).
 //
 // Hits. A hit at t counts when tnear < t <= tfar (Embree's segment rule).
 // intersect() traces each ray over (tnear, min(tfar, widen(hits[i].t))],
@@ -31,11 +34,12 @@
 // Written per improved ray: t (Embree's float t), the user's ids, Embree's
 // u, v (p = (1-u-v) v0 + u v1 + v v2) and the unit geometric normal computed
 // in float64 from the stored vertices as normalize(cross(v1 - v0, v2 - v0)),
-// rounded to float. That is Embree's sign convention — its Ng is cross(e2, e1)
-// with e1 = v0 - v1, e2 = v2 - v0, i.e. cross(v1 - v0, v2 - v0), checked in
-// NormalFollowsEmbreeNgSign — and therefore Open3D's (its primitive_normals
-// are Embree's Ng normalised): the normal points to the side from which the
-// vertices appear counter-clockwise, whichever side the ray comes from.
+// rounded to float (at build time). That is Embree's sign convention — its
+// Ng is cross(e2, e1) with e1 = v0 - v1, e2 = v2 - v0, i.e. cross(v1 - v0,
+// v2 - v0), checked in NormalFollowsEmbreeNgSign — and therefore Open3D's
+// (its primitive_normals are Embree's Ng normalised): the normal points to
+// the side from which the vertices appear counter-clockwise, whichever side
+// the ray comes from.
 // Embree's u, v lose accuracy with the ray origin's distance over the
 // triangle's size (about 1.5e-4 at a ratio of 300).
 //
@@ -46,10 +50,11 @@
 // rtcOccluded1. Both give bitwise equal results (tested), so a ray's answer
 // does not depend on the batch it came in.
 //
-// Memory. memory_bytes() = the capacities of the triangle, id and index
-// buffers + the bytes Embree's memory monitor attributed to this scene (see
-// EmbreeDevice) + kUntrackedBytes for the objects Embree allocates without
-// reporting them (scene, geometry, accel headers) and this object. The build's
+// Memory. memory_bytes() = the capacities of the triangle, hit-record and
+// index buffers (68 B/tri) + the bytes Embree's memory monitor attributed to
+// this scene (see EmbreeDevice) + kUntrackedBytes for the objects Embree
+// allocates without reporting them (scene, geometry, accel headers) and this
+// object. The build's
 // peak (input brick, copies, buffers and Embree's peak during commit) is
 // build_peak_bytes(); reserve_bytes() bounds both (formula and measurements in
 // embree_brick.cpp).
@@ -118,7 +123,7 @@ class EmbreeBrickAccel final : public BrickAccel {
 
   uint64_t memory_bytes() const override;
   double build_seconds() const override { return build_seconds_; }
-  uint32_t triangle_count() const override { return static_cast<uint32_t>(ids_.size()); }
+  uint32_t triangle_count() const override { return static_cast<uint32_t>(hit_records_.size()); }
 
   // Beyond BrickAccel (statistics and tests):
   uint32_t brick_id() const { return brick_id_; }
@@ -150,10 +155,18 @@ class EmbreeBrickAccel final : public BrickAccel {
   uint32_t brick_id_ = 0;
   RTCScene scene_ = nullptr;         // null for a brick without non-degenerate triangles
   std::vector<Triangle> triangles_;  // Embree's vertex buffer; capacity > size
-  std::vector<TriangleId> ids_;      // ids_[k] names triangles_[k]
-  std::vector<uint32_t> indices_;    // Embree's index buffer; capacity > size
-  bool prim_is_triangle_ = true;     // no degenerate left out: primID == k
-  float max_extent_ = 0;             // largest side of the brick's bounds (coherence test)
+  // Per triangle k: its unit normal (float64 computation rounded to float;
+  // zero for a degenerate triangle, never hit) and the user's ids.
+  struct HitRecord {
+    Vec3f normal;
+    uint32_t geometry_id;
+    uint32_t primitive_id;
+  };
+  static_assert(sizeof(HitRecord) == 20);
+  std::vector<HitRecord> hit_records_;
+  std::vector<uint32_t> indices_;  // Embree's index buffer; capacity > size
+  bool prim_is_triangle_ = true;   // no degenerate left out: primID == k
+  float max_extent_ = 0;           // largest side of the brick's bounds (coherence test)
   uint64_t embree_bytes_ = 0;
   uint64_t build_peak_bytes_ = 0;
   double build_seconds_ = 0;

@@ -411,10 +411,6 @@ TEST(EmbreeBrickMeasure, DISABLED_PacketSpeed) {
   rtcReleaseScene(scene);
 }
 
-}  // namespace
-}  // namespace outcore
-namespace outcore {
-namespace {
 // For profiling (perf record): the accel alone on 1M random bunny rays (or,
 // with OUTCORE_MEASURE_CAMERA=1, 1024^2 camera rays), 5 times.
 TEST(EmbreeBrickMeasure, DISABLED_AccelOnly) {
@@ -430,10 +426,7 @@ TEST(EmbreeBrickMeasure, DISABLED_AccelOnly) {
     std::printf("%.2f M rays/s\n", mrays_per_second(**accel, rays, accel_test::all_ids(rays.size()), 1));
   }
 }
-}  // namespace
-}  // namespace outcore
-namespace outcore {
-namespace {
+
 // Default choice: trace speed of the candidate configurations on the bunny,
 // 1M incoherent rays, single thread, alternating 8 times (best of each).
 TEST(EmbreeBrickMeasure, DISABLED_DefaultChoice) {
