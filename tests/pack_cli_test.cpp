@@ -23,6 +23,7 @@ namespace outcore {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::contains;
 using testing::outcore_binary;
 using testing::run_subprocess;
 using testing::SubprocessOptions;
@@ -38,14 +39,7 @@ constexpr uint64_t kPackFixedOverheadMiB = 32;
 
 SubprocessResult outcore(std::vector<std::string> args,
                          std::chrono::milliseconds timeout = std::chrono::milliseconds(300'000)) {
-  args.insert(args.begin(), outcore_binary());
-  SubprocessOptions options;
-  options.timeout = timeout;
-  return run_subprocess(args, options);
-}
-
-bool contains(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
+  return testing::run_outcore(std::move(args), timeout);
 }
 
 // Everything in `dir` (the parent of the would-be store).

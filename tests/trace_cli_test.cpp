@@ -32,6 +32,7 @@ namespace outcore {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::contains;
 using testing::outcore_binary;
 using testing::run_subprocess;
 using testing::SubprocessOptions;
@@ -42,14 +43,7 @@ using testing::write_text_file;
 constexpr std::size_t kRayCount = 3000;
 
 SubprocessResult outcore(std::vector<std::string> args) {
-  args.insert(args.begin(), outcore_binary());
-  SubprocessOptions options;
-  options.timeout = std::chrono::milliseconds(60'000);
-  return run_subprocess(args, options);
-}
-
-bool contains(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
+  return testing::run_outcore(std::move(args), std::chrono::milliseconds(60'000));
 }
 
 std::string read_bytes(const std::string& path) {

@@ -6,18 +6,11 @@
 
 #include "core/io/source_factory.h"
 
+#include "core/gen/splitmix.h"
+
 namespace outcore {
 
 namespace {
-
-uint64_t mix64(uint64_t x) {  // splitmix64 finaliser
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ull;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebull;
-  x ^= x >> 31;
-  return x;
-}
 
 constexpr uint64_t kGolden = 0x9e3779b97f4a7c15ull;
 

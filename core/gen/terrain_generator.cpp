@@ -4,20 +4,13 @@
 #include <limits>
 #include <vector>
 
+#include "core/gen/splitmix.h"
+
 namespace outcore {
 
 namespace {
 
 constexpr double kBaseFrequency = 4.0;  // noise cells per side in octave 0
-
-uint64_t mix64(uint64_t x) {  // splitmix64 finaliser
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ull;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebull;
-  x ^= x >> 31;
-  return x;
-}
 
 // Lattice value in [-1, 1) of noise cell corner (ix, iz) for one octave's key.
 double lattice(uint64_t octave_key, int64_t ix, int64_t iz) {

@@ -1,4 +1,5 @@
 #include "tests/support/subprocess.h"
+#include "tests/support/test_paths.h"
 
 #include <fcntl.h>
 #include <poll.h>
@@ -286,6 +287,13 @@ SubprocessResult run_subprocess(const std::vector<std::string>& argv, const Subp
   result.stdout_text = read_all(out.get());
   result.stderr_text = read_all(err.get());
   return result;
+}
+
+SubprocessResult run_outcore(std::vector<std::string> args, std::chrono::milliseconds timeout) {
+  args.insert(args.begin(), outcore_binary());
+  SubprocessOptions options;
+  options.timeout = timeout;
+  return run_subprocess(args, options);
 }
 
 }  // namespace outcore::testing

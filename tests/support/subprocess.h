@@ -60,4 +60,7 @@ struct SubprocessResult {
 // argv[0] is the path of the program (execv: no PATH search).
 SubprocessResult run_subprocess(const std::vector<std::string>& argv, const SubprocessOptions& options = {});
 
+// Runs the built `outcore` binary with args, killed after timeout.
+SubprocessResult run_outcore(std::vector<std::string> args, std::chrono::milliseconds timeout);
+
 }  // namespace outcore::testing

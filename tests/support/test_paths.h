@@ -7,8 +7,12 @@
 
 namespace outcore::testing {
 
-inline std::string model_path(const std::string& name) { return std::string(OUTCORE_MODELS_DIR) + "/" + name; }
-inline std::string outcore_binary() { return OUTCORE_BINARY; }
+inline std::string model_path(const std::string& name) {
+  return std::string(OUTCORE_MODELS_DIR) + "/" + name;
+}
+inline std::string outcore_binary() {
+  return OUTCORE_BINARY;
+}
 
 // A fresh empty directory under the system temp dir, removed by the destructor.
 class TempDir {
@@ -23,6 +27,10 @@ class TempDir {
  private:
   std::string path_;
 };
+
+inline bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
 
 // Writes text to a file (test fixtures), aborting the test on failure.
 void write_text_file(const std::string& path, const std::string& text);
