@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Configures and builds Outcore. Usage: scripts/build.sh [release|asan]
-# release -> build/, asan -> build-asan/ (AddressSanitizer + UBSan, Debug).
+# release -> build/, asan -> build-asan/ (AddressSanitizer + UBSan, Debug);
+# OUTCORE_BUILD_DIR overrides the directory (parallel work trees of one checkout).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 kind=${1:-release}
@@ -10,5 +11,6 @@ case "$kind" in
   asan) dir=build-asan; flags=(-DCMAKE_BUILD_TYPE=Debug -DOUTCORE_SANITIZE=ON -DOUTCORE_WERROR=ON) ;;
   *) echo "usage: $0 [release|asan]" >&2; exit 2 ;;
 esac
+dir=${OUTCORE_BUILD_DIR:-$dir}
 cmake -S . -B "$dir" -G Ninja "${flags[@]}" >/dev/null
 ninja -C "$dir" -j "$jobs"
