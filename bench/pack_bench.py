@@ -43,8 +43,10 @@ def run_pack(binary, spec, out, mem_mb, brick_tris):
         sys.exit(f"pack failed:\n{stdout}")
     tris = int(re.search(r"packed (\d+) triangles", stdout).group(1))
     store_bytes = sum(os.path.getsize(os.path.join(out, f)) for f in os.listdir(out))
+    phases = {name: float(value) for name, value in re.findall(r"(scan|histogram|fill|bricks|disk|finish) ([\d.]+) s",
+                                                               stdout)}
     return {"seconds": seconds, "triangles": tris, "bytes": store_bytes, "peak_rss": rusage.ru_maxrss * 1024,
-            "stdout": stdout}
+            "stdout": stdout, "phases": phases}
 
 
 def main():
@@ -61,6 +63,8 @@ def main():
     spec = f"gen:city?of=(gen:sphere?level=5)&copies={args.copies}"
     out = os.path.join(args.work, "city.oc")
     rows = []
+    phase_rows = []
+    print(f"load average before: {os.getloadavg()}", flush=True)
     for run in range(args.runs):
         dd = run_dd(os.path.join(args.work, "dd.bin"), args.dd_gib)
         pack = run_pack(args.binary, spec, out, args.mem_mb, args.brick_tris)
@@ -69,6 +73,7 @@ def main():
                "pack_write_MBps": write_rate / 1e6, "ratio": write_rate / dd, "peak_rss_MiB": pack["peak_rss"] / 2**20,
                "store_GiB": pack["bytes"] / 2**30, "triangles": pack["triangles"]}
         rows.append(row)
+        phase_rows.append(pack["phases"])
         print(f"run {run + 1}/{args.runs}: " + ", ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k} {v}"
                                                         for k, v in row.items()), flush=True)
         print(pack["stdout"], flush=True)
@@ -80,6 +85,13 @@ def main():
     print("|---|---|---|---|---|---|---|")
     print(f"| {med['Mtris_s']:.2f} | {med['pack_s']:.1f} | {med['peak_rss_MiB']:.0f} | {med['store_GiB']:.2f} | "
           f"{med['pack_write_MBps']:.0f} | {med['dd_MBps']:.0f} | {med['ratio']:.2f} |")
+    if phase_rows and phase_rows[0]:
+        names = list(phase_rows[0])
+        print("\nphase medians, s (disk = part of bricks spent waiting for the writer):")
+        print("| " + " | ".join(names) + " |")
+        print("|" + "---|" * len(names))
+        print("| " + " | ".join(f"{statistics.median(p.get(n, 0.0) for p in phase_rows):.1f}" for n in names) + " |")
+    print(f"load average after: {os.getloadavg()}")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ For each scene and ray set (1M incoherent, 1M camera; bench/make_rays.py):
 
 Needs the bench venv: `bash scripts/install.sh --bench`.
 Usage: .venv-bench/bin/python bench/trace_bench.py [--runs 6] [--rays 1000000] [--scenes bunny,city]
+       [--outcore build/client/outcore] [--work build/bench-trace] [--json rows.json] [--png chart.png]
 """
 import argparse
 import json
@@ -85,12 +86,18 @@ def outcore_trace(store, rays_path, out, runs, extra):
 
 
 def main():
+    global OUTCORE
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=6)
     ap.add_argument("--rays", type=int, default=1_000_000)
     ap.add_argument("--scenes", default="bunny,city")
     ap.add_argument("--work", default=os.path.join(ROOT, "build", "bench-trace"))
+    ap.add_argument("--outcore", default=OUTCORE, help="the outcore binary to measure")
+    ap.add_argument("--json", help="also write the rows as JSON to this file")
+    ap.add_argument("--png", help="also draw a bar chart of the rows into this PNG (needs matplotlib)")
     a = ap.parse_args()
+    OUTCORE = os.path.abspath(a.outcore)
+    load_before = os.getloadavg()[0]
     os.makedirs(a.work, exist_ok=True)
     rows = []
     for name in a.scenes.split(","):
@@ -101,13 +108,15 @@ def main():
         info = os.path.join(a.work, name + ".json")
         with open(info, "w") as f:
             f.write(run([OUTCORE, "info", store, "--json"]))
+        with open(info) as f:
+            bricks = json.load(f)["bricks"]
         tris, ids = read_store_triangles(store)
         for kind in ["incoherent", "camera"]:
             rays_path = os.path.join(a.work, f"{name}-{kind}.npy")
             run([sys.executable, os.path.join(ROOT, "bench", "make_rays.py"), info, kind, str(a.rays), rays_path])
             rays = np.load(rays_path)
             out = os.path.join(a.work, f"{name}-{kind}-hits.npy")
-            cold, warm, _ = outcore_trace(store, rays_path, out, a.runs, [])
+            cold, warm, warm_stats = outcore_trace(store, rays_path, out, a.runs, [])
             _, warm_noreorder, _ = outcore_trace(store, rays_path, out + ".noreorder.npy", min(a.runs, 3),
                                                  ["--no-reorder"])
             o3d_s, o3d_prims = open3d_cast(tris, rays, a.runs)
@@ -119,18 +128,49 @@ def main():
             agree = np.mean((o3d_hit == ours_hit) & (~ours_hit | ((mapped == hits["primitive_id"]) &
                                                                   (mapped_g == hits["geometry_id"]))))
             n = len(rays)
-            row = dict(scene=name, triangles=len(tris), rays=kind, outcore_warm_Mrays=n / warm / 1e6,
-                       open3d_Mrays=n / o3d_s / 1e6, ratio=o3d_s / warm, noreorder_Mrays=n / warm_noreorder / 1e6,
-                       cold_s=cold, agreement=agree)
+            row = dict(scene=name, triangles=len(tris), bricks=bricks, rays=kind,
+                       outcore_warm_Mrays=n / warm / 1e6, open3d_Mrays=n / o3d_s / 1e6, ratio=o3d_s / warm,
+                       noreorder_Mrays=n / warm_noreorder / 1e6, reorder_gain=warm_noreorder / warm,
+                       cold_s=cold, agreement=agree, load_avg=os.getloadavg()[0])
             rows.append(row)
             print(json.dumps(row), flush=True)
-    print("\n| scene | triangles | rays | outcore warm M rays/s | Open3D M rays/s | ratio | no-reorder M rays/s "
-          "| cold run s (first answer) | agreement |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print(f"\nload average (1 min) at start {load_before:.1f}, at end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+    print("\n| scene | triangles | bricks | rays | outcore warm M rays/s | Open3D M rays/s | ratio vs Open3D | no-reorder M rays/s "
+          "| reorder gain | cold run s (first answer) | agreement |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['scene']} | {r['triangles']:,} | {r['rays']} | {r['outcore_warm_Mrays']:.2f} | "
-              f"{r['open3d_Mrays']:.2f} | {r['ratio']:.2f} | {r['noreorder_Mrays']:.2f} | {r['cold_s']:.2f} | "
-              f"{r['agreement'] * 100:.3f} % |")
+        print(f"| {r['scene']} | {r['triangles']:,} | {r['bricks']} | {r['rays']} | {r['outcore_warm_Mrays']:.2f} | "
+              f"{r['open3d_Mrays']:.2f} | {r['ratio']:.2f} | {r['noreorder_Mrays']:.2f} | {r['reorder_gain']:.2f} | "
+              f"{r['cold_s']:.2f} | {r['agreement'] * 100:.3f} % |")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(rows, f, indent=1)
+    if a.png:
+        draw_chart(rows, a.png)
+
+
+def draw_chart(rows, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    labels = [f"{r['scene']}\n{r['rays']}" for r in rows]
+    series = [("outcore (reorder)", "outcore_warm_Mrays"), ("outcore --no-reorder", "noreorder_Mrays"),
+              ("Open3D 0.20", "open3d_Mrays")]
+    width = 0.8 / len(series)
+    fig, ax = plt.subplots(figsize=(2.2 * len(rows) + 2, 4))
+    for s, (name, key) in enumerate(series):
+        xs = [i + (s - (len(series) - 1) / 2) * width for i in range(len(rows))]
+        ax.bar(xs, [r[key] for r in rows], width, label=name)
+    for i, r in enumerate(rows):
+        ax.annotate(f"{r['ratio']:.2f}x", (i, max(r["outcore_warm_Mrays"], r["open3d_Mrays"])), ha="center",
+                    va="bottom", fontsize=9)
+    ax.set_xticks(range(len(rows)))
+    ax.set_xticklabels(labels)
+    ax.set_ylabel("M rays/s (2 threads, warm, median)")
+    ax.set_title("outcore trace vs Open3D RaycastingScene.cast_rays (label: ratio)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,7 @@ APT_PACKAGES=(
   libembree-dev libopenvdb-dev libcereal-dev libxxhash-dev
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler grpc-proto
   libspdlog-dev libtbb-dev libtinyobjloader-dev libcli11-dev
-  libgtest-dev libgmock-dev libbenchmark-dev
+  libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   python3-venv python3-dev
 )
 
@@ -39,6 +39,17 @@ if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   .venv/bin/pip install -q --upgrade pip >/dev/null
   .venv/bin/pip install -q -r "$PY_REQS"
   echo "$want" > "$stamp"
+fi
+# The Python client (client/python; stubs generated from proto/ at build time),
+# reinstalled only when its sources or the proto changed.
+client_stamp=.venv/.outcore-client.sha
+client_want=$(find client/python/pyproject.toml client/python/setup.py client/python/src \
+    proto/outcore/v1/scene_query.proto -type f ! -name '*_pb2*' ! -path '*/__pycache__/*' \
+    ! -path '*.egg-info/*' | LC_ALL=C sort | xargs sha256sum | sha256sum | cut -d' ' -f1)
+if [ "$(cat "$client_stamp" 2>/dev/null)" != "$client_want" ] || ! .venv/bin/python -c 'import outcore' 2>/dev/null; then
+  echo "[install] pip install ./client/python"
+  .venv/bin/pip install -q ./client/python
+  echo "$client_want" > "$client_stamp"
 fi
 # Benchmarks compare against Open3D (large), kept out of the test venv.
 if [ "${1:-}" = "--bench" ]; then

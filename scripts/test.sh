@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The README's test command: installs what is missing, builds, and runs every
-# test — the unit and integration suite (ctest) on the optimised build, then the
-# same suite once more under AddressSanitizer + UndefinedBehaviorSanitizer.
+# test — the unit and integration suite (ctest) and the Python client's tests
+# (pytest, tests/python) on the optimised build, then the C++ suite once more
+# under AddressSanitizer + UndefinedBehaviorSanitizer.
 # Set OUTCORE_SKIP_ASAN=1 to skip the sanitizer pass locally.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -12,6 +13,8 @@ echo "== build (release)"
 bash scripts/build.sh release
 echo "== tests (release)"
 ctest --test-dir build --output-on-failure -j "$(nproc)" --timeout 900
+echo "== tests (python client)"
+OUTCORE_BINARY=build/client/outcore .venv/bin/python -m pytest tests/python -q -p no:cacheprovider
 
 if [ "${OUTCORE_SKIP_ASAN:-0}" != 1 ]; then
   echo "== build (asan+ubsan)"

@@ -1,8 +1,10 @@
 // The `outcore` command: one binary whose subcommands are implemented in the
-// component they belong to (core: pack, info, trace; later server: serve; client: query).
+// component they belong to (core: pack, info, trace; server: serve; client: query).
 #include <CLI/CLI.hpp>
 
+#include "client/cli/query_command.h"
 #include "core/cli/commands.h"
+#include "server/serve_command.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"Outcore: out-of-core scene query service for ray tracing"};
@@ -12,6 +14,10 @@ int main(int argc, char** argv) {
   outcore::add_pack_command(app, exit_code);
   outcore::add_info_command(app, exit_code);
   outcore::add_trace_command(app, exit_code);
+  outcore::add_stress_command(app, exit_code);
+  outcore::add_cache_sim_command(app, exit_code);
+  outcore::add_serve_command(app, exit_code);
+  outcore::add_query_command(app, exit_code);
   CLI11_PARSE(app, argc, argv);
   return exit_code;
 }

@@ -1,8 +1,12 @@
 #include "core/accel/brick_accel_factory.h"
 
+#include <charconv>
+#include <cmath>
 #include <string>
 
+#include "core/accel/bvh/bvh_brick.h"
 #include "core/accel/embree_brick.h"
+#include "core/accel/reference_brick.h"
 
 namespace outcore {
 namespace {
@@ -61,15 +65,72 @@ Expected<std::unique_ptr<BrickBuilder>> make_embree_builder(const BrickAccelOpti
   return std::unique_ptr<BrickBuilder>(new EmbreeBrickBuilder(config));
 }
 
+// The whole value as a number, or nothing ("8x", "", " 8" are errors).
+template <class T>
+bool parse_number(const std::string& text, T& out) {
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, out);
+  return ec == std::errc() && ptr == end && !text.empty();
+}
+
+// Default triangle_test=watertight: it is the configuration with zero leaks
+// through shared edges and vertices (the stress suite checks it at every
+// offset and scale) and agrees with the float64 reference except on true
+// ties, at a modest cost over mt (docs/ACCURACY.md); mt leaks at vertices,
+// double is the slower accuracy reference. The builder defaults are in
+// BinnedSahBuilder::Config.
+Expected<std::unique_ptr<BrickBuilder>> make_bvh_builder(const BrickAccelOptions& options) {
+  BvhBrickConfig config;
+  BinnedSahBuilder::Config& b = config.builder;
+  for (const auto& [key, value] : options) {
+    if (key == "triangle_test") {
+      const auto test = triangle_test_from_name(value);
+      if (!test) {
+        return invalid_argument(
+            "brick accel bvh: option triangle_test must be mt, watertight or double, got '" + value + "'");
+      }
+      config.triangle_test = *test;
+    } else if (key == "bins" || key == "max_leaf_size") {
+      uint32_t number = 0;
+      if (!parse_number(value, number)) {
+        return invalid_argument("brick accel bvh: option " + key + " must be a whole number, got '" + value +
+                                "'");
+      }
+      (key == "bins" ? b.bin_count : b.max_leaf_size) = number;
+    } else if (key == "traversal_cost" || key == "intersection_cost") {
+      float number = 0;
+      if (!parse_number(value, number) || !std::isfinite(number)) {
+        return invalid_argument("brick accel bvh: option " + key + " must be a number, got '" + value + "'");
+      }
+      (key == "traversal_cost" ? b.traversal_cost : b.intersection_cost) = number;
+    } else {
+      return invalid_argument(
+          "brick accel bvh: unknown option '" + key +
+          "' (known: triangle_test, bins, max_leaf_size, traversal_cost, intersection_cost)");
+    }
+  }
+  const Status valid = b.validate();
+  if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
+  return std::unique_ptr<BrickBuilder>(new BvhBrickBuilder(config));
+}
+
 }  // namespace
 
 std::vector<std::string> brick_accel_names() {
-  return {"embree"};
+  return {"embree", "bvh", "reference"};
 }
 
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options) {
   if (name == "embree") return make_embree_builder(options);
+  if (name == "bvh") return make_bvh_builder(options);
+  if (name == "reference") {
+    if (!options.empty()) {
+      return invalid_argument("brick accel reference: unknown option '" + options.begin()->first +
+                              "' (it takes none)");
+    }
+    return std::unique_ptr<BrickBuilder>(new ReferenceBrickBuilder());
+  }
   return not_found("unknown brick accel '" + name + "' (known: " + joined(brick_accel_names()) + ")");
 }
 

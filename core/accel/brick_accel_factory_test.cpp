@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "core/accel/accel_test_util.h"
+#include "core/accel/bvh/bvh_brick.h"
 #include "core/accel/embree_brick.h"
 #include "core/accel/embree_device.h"
 
@@ -22,7 +23,7 @@ const EmbreeBrickConfig& embree_config(const BrickBuilder& builder) {
 }
 
 TEST(BrickAccelFactory, NamesAndDefaults) {
-  EXPECT_EQ(brick_accel_names(), std::vector<std::string>{"embree"});
+  EXPECT_EQ(brick_accel_names(), (std::vector<std::string>{"embree", "bvh", "reference"}));
   auto builder = make_brick_builder("embree", {});
   ASSERT_TRUE(builder.ok()) << builder.status().to_string();
   EXPECT_EQ((*builder)->name(), "embree");
@@ -66,6 +67,58 @@ TEST(BrickAccelFactory, BadOptionsAreNamed) {
   for (const auto& [options, parts] : cases) {
     auto builder = make_brick_builder("embree", options);
     ASSERT_FALSE(builder.ok());
+    EXPECT_EQ(builder.status().code(), StatusCode::kInvalidArgument);
+    for (const auto& part : parts) {
+      EXPECT_TRUE(contains(builder.status().message(), part))
+          << builder.status().message() << " lacks " << part;
+    }
+  }
+}
+
+const BvhBrickConfig& bvh_config(const BrickBuilder& builder) {
+  return dynamic_cast<const BvhBrickBuilder&>(builder).config();
+}
+
+TEST(BrickAccelFactory, BvhDefaultsAndOptions) {
+  auto builder = make_brick_builder("bvh", {});
+  ASSERT_TRUE(builder.ok()) << builder.status().to_string();
+  EXPECT_EQ((*builder)->name(), "bvh");
+  EXPECT_EQ(bvh_config(**builder).triangle_test, TriangleTest::kWatertight);
+  EXPECT_EQ(bvh_config(**builder).builder.bin_count, BinnedSahBuilder::Config{}.bin_count);
+  EXPECT_LT((*builder)->reserve_bytes(1000), (*builder)->reserve_bytes(2000));
+  for (const auto& [name, test] :
+       {std::pair{"mt", TriangleTest::kMt}, std::pair{"watertight", TriangleTest::kWatertight},
+        std::pair{"double", TriangleTest::kDouble}}) {
+    builder = make_brick_builder("bvh", {{"triangle_test", name}});
+    ASSERT_TRUE(builder.ok()) << builder.status().to_string();
+    EXPECT_EQ(bvh_config(**builder).triangle_test, test);
+  }
+  builder = make_brick_builder(
+      "bvh", {{"bins", "32"}, {"max_leaf_size", "2"}, {"traversal_cost", "0.5"}, {"intersection_cost", "2"}});
+  ASSERT_TRUE(builder.ok()) << builder.status().to_string();
+  EXPECT_EQ(bvh_config(**builder).builder.bin_count, 32u);
+  EXPECT_EQ(bvh_config(**builder).builder.max_leaf_size, 2u);
+  EXPECT_EQ(bvh_config(**builder).builder.traversal_cost, 0.5f);
+  EXPECT_EQ(bvh_config(**builder).builder.intersection_cost, 2.0f);
+}
+
+TEST(BrickAccelFactory, BadBvhOptionsAreNamed) {
+  const std::vector<std::pair<BrickAccelOptions, std::vector<std::string>>> cases = {
+      {{{"triangle_test", "fast"}}, {"triangle_test", "'fast'", "mt, watertight or double"}},
+      {{{"triangle_test", ""}}, {"triangle_test", "''"}},
+      {{{"triangle_test", "Watertight"}}, {"'Watertight'"}},
+      {{{"robust", "1"}}, {"'robust'", "triangle_test"}},
+      {{{"bins", "1"}}, {"bins", "2..256"}},
+      {{{"bins", "16x"}}, {"bins", "'16x'"}},
+      {{{"bins", "-4"}}, {"bins", "'-4'"}},
+      {{{"max_leaf_size", "0"}}, {"max_leaf_size"}},
+      {{{"max_leaf_size", ""}}, {"max_leaf_size", "''"}},
+      {{{"traversal_cost", "nan"}}, {"traversal_cost", "'nan'"}},
+      {{{"intersection_cost", "-1"}}, {"intersection_cost"}},
+  };
+  for (const auto& [options, parts] : cases) {
+    auto builder = make_brick_builder("bvh", options);
+    ASSERT_FALSE(builder.ok()) << options.begin()->first << "=" << options.begin()->second;
     EXPECT_EQ(builder.status().code(), StatusCode::kInvalidArgument);
     for (const auto& part : parts) {
       EXPECT_TRUE(contains(builder.status().message(), part))

@@ -71,9 +71,11 @@ BrickCache::BrickCache(std::shared_ptr<const SceneStore> store, std::unique_ptr<
       budget_bytes_(budget_bytes),
       entries_(store_ ? store_->brick_count() : 0) {
   assert(store_ && builder_ && policy_);
+  policy_->set_budget(budget_bytes_);
 }
 
 BrickCache::~BrickCache() {
+  flush_access_trace();
 #ifndef NDEBUG
   for (const Entry& entry : entries_) {
     assert(entry.pins == 0 && "a PinnedBrick outlived its BrickCache");
@@ -96,6 +98,7 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
                         std::to_string(entries_.size()) + " bricks)");
   }
   const uint32_t triangles = store_->manifest().bricks[brick_id].triangle_count;
+  const uint64_t reservation = builder_->reserve_bytes(triangles);
   // entries_ is never resized, so this reference stays valid across unlocks.
   Entry& entry = entries_[brick_id];
 
@@ -111,6 +114,12 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
       pin.accel_ = entry.accel.get();
       pin.brick_ = brick_id;
       pin.was_hit_ = !waited;
+      if (trace_) {
+        auto chunk = record_access(brick_id, entry.bytes, reservation, 0.0,
+                                   waited ? AccessOutcome::kWait : AccessOutcome::kHit);
+        lock.unlock();
+        hand_over(std::move(chunk));
+      }
       return pin;
     }
     // Building (single flight): wait for that build. If it fails, the brick is
@@ -121,7 +130,6 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
 
   // Absent: this thread builds it. Other acquirers of the brick wait from here
   // on, including while this thread waits for room.
-  const uint64_t reservation = builder_->reserve_bytes(triangles);
   if (reservation > budget_bytes_) return too_large(brick_id, reservation);
   entry.state = State::kBuilding;
   if (!make_room(reservation, lock)) {
@@ -168,7 +176,7 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   entry.accel = std::move(accel);
   entry.state = State::kReady;
   entry.pins = 1;
-  policy_->on_insert(brick_id, bytes);
+  policy_->on_insert(brick_id, bytes, seconds);
   ++counters_.builds;
   ++counters_.misses;
   ++counters_.resident_bricks;
@@ -180,8 +188,11 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   pin.brick_ = brick_id;
   pin.was_hit_ = false;
   const uint64_t resident = counters_.resident_bytes;
+  std::vector<AccessRecord> chunk;
+  if (trace_) chunk = record_access(brick_id, bytes, reservation, seconds, AccessOutcome::kMiss);
   lock.unlock();
   changed_.notify_all();
+  hand_over(std::move(chunk));
 
   if (overran) {
     spdlog::warn(
@@ -259,6 +270,51 @@ void BrickCache::account(int64_t delta) {
   assert(delta >= 0 || counters_.resident_bytes >= static_cast<uint64_t>(-delta));
   counters_.resident_bytes = static_cast<uint64_t>(static_cast<int64_t>(counters_.resident_bytes) + delta);
   counters_.peak_resident_bytes = std::max(counters_.peak_resident_bytes, counters_.resident_bytes);
+}
+
+void BrickCache::set_access_trace(std::shared_ptr<AccessTraceWriter> trace) {
+  flush_access_trace();
+  if (trace) trace->set_info(policy_->name(), budget_bytes_, builder_->name(), store_->brick_count());
+  std::lock_guard lock(mutex_);
+  trace_ = std::move(trace);
+  trace_seq_ = 0;
+}
+
+std::vector<AccessRecord> BrickCache::record_access(uint32_t brick, uint64_t bytes, uint64_t reserved,
+                                                    double seconds, AccessOutcome outcome) {
+  // Records are handed over in chunks so the writer's lock and the file are
+  // touched once per kChunk acquisitions, never under the cache's lock.
+  constexpr std::size_t kChunk = 4096;
+  if (trace_buffer_.capacity() < kChunk) trace_buffer_.reserve(kChunk);
+  trace_buffer_.push_back({trace_seq_++, brick, bytes, reserved, seconds, outcome});
+  if (trace_buffer_.size() < kChunk) return {};
+  return std::exchange(trace_buffer_, {});
+}
+
+void BrickCache::hand_over(std::vector<AccessRecord> chunk) {
+  if (chunk.empty()) return;
+  std::shared_ptr<AccessTraceWriter> trace;
+  {
+    std::lock_guard lock(mutex_);
+    trace = trace_;
+  }
+  if (trace) trace->append(std::move(chunk));
+}
+
+void BrickCache::flush_access_trace() {
+  std::vector<AccessRecord> chunk;
+  std::shared_ptr<AccessTraceWriter> trace;
+  {
+    std::lock_guard lock(mutex_);
+    chunk = std::exchange(trace_buffer_, {});
+    trace = trace_;
+  }
+  if (trace && !chunk.empty()) trace->append(std::move(chunk));
+}
+
+void BrickCache::hint_schedule(std::span<const uint32_t> upcoming) {
+  std::lock_guard lock(mutex_);
+  policy_->on_schedule_hint(upcoming);
 }
 
 bool BrickCache::is_resident(uint32_t brick_id) const {

@@ -20,6 +20,10 @@
 //   store is OUT_OF_RANGE (as in SceneStore::load_brick).
 // - Counters: hits + misses counts successful acquisitions; failed ones are in
 //   neither. builds, bytes_built and build_seconds count successful builds.
+// - Access trace (optional, set_access_trace): every successful acquisition is
+//   recorded (access_trace.h) into a buffer under the lock and handed to the
+//   writer in chunks outside it; the destructor and flush_access_trace() hand
+//   over the rest.
 //
 // Thread-safety: all member functions may be called from any thread. One mutex
 // guards the table; it is taken per brick acquisition, never per ray, and is
@@ -30,9 +34,11 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <vector>
 
 #include "core/accel/brick_accel_factory.h"
+#include "core/cache/access_trace.h"
 #include "core/cache/eviction_policy.h"
 #include "core/store/scene_store.h"
 
@@ -94,6 +100,15 @@ class BrickCache {
   const BrickBuilder& builder() const { return *builder_; }
   const EvictionPolicy& policy() const { return *policy_; }
 
+  // Records every later acquisition into `trace` (nullptr stops recording).
+  // Set it before the first acquire so the trace starts from an empty cache.
+  void set_access_trace(std::shared_ptr<AccessTraceWriter> trace);
+  // Hands the buffered records to the writer now (they are written in order).
+  void flush_access_trace();
+  // Passes the bricks the caller will request next, soonest first, to the
+  // policy (EvictionPolicy::on_schedule_hint).
+  void hint_schedule(std::span<const uint32_t> upcoming);
+
  private:
   friend class PinnedBrick;
   enum class State : uint8_t { kAbsent, kBuilding, kReady };
@@ -118,6 +133,11 @@ class BrickCache {
   void release_victims(std::vector<std::unique_ptr<BrickAccel>>& victims, uint64_t bytes,
                        std::unique_lock<std::mutex>& lock);
   void account(int64_t delta);
+  // Under the lock: appends a record; returns a full chunk to hand to the
+  // writer once the lock is released (empty otherwise).
+  std::vector<AccessRecord> record_access(uint32_t brick, uint64_t bytes, uint64_t reserved, double seconds,
+                                          AccessOutcome outcome);
+  void hand_over(std::vector<AccessRecord> chunk);
   Status too_large(uint32_t brick_id, uint64_t reservation) const;
 
   std::shared_ptr<const SceneStore> store_;
@@ -129,6 +149,9 @@ class BrickCache {
   std::condition_variable changed_;
   std::vector<Entry> entries_;
   CacheCounters counters_;
+  std::shared_ptr<AccessTraceWriter> trace_;
+  std::vector<AccessRecord> trace_buffer_;
+  uint64_t trace_seq_ = 0;
 };
 
 }  // namespace outcore

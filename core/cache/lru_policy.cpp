@@ -36,7 +36,7 @@ void LruPolicy::unlink(uint32_t brick) {
   --size_;
 }
 
-void LruPolicy::on_insert(uint32_t brick, uint64_t /*bytes*/) {
+void LruPolicy::on_insert(uint32_t brick, uint64_t /*bytes*/, double /*build_seconds*/) {
   if (tracked(brick)) unlink(brick);
   link_front(brick);
 }

@@ -22,7 +22,7 @@ namespace outcore {
 class LruPolicy final : public EvictionPolicy {
  public:
   // Tracks `brick` as the most recently used (an already tracked brick moves).
-  void on_insert(uint32_t brick, uint64_t bytes) override;
+  void on_insert(uint32_t brick, uint64_t bytes, double build_seconds) override;
   // Makes a tracked brick the most recently used; tracks an untracked one.
   void on_access(uint32_t brick) override;
   // Forgets `brick`; a no-op for an untracked one.

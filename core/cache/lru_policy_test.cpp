@@ -33,7 +33,7 @@ TEST(LruPolicyTest, EmptyPolicyHasNoVictim) {
 
 TEST(LruPolicyTest, EvictsInInsertionOrderWithoutAccesses) {
   LruPolicy lru;
-  for (uint32_t b : {5u, 1u, 9u, 0u}) lru.on_insert(b, 100);
+  for (uint32_t b : {5u, 1u, 9u, 0u}) lru.on_insert(b, 100, 0.0);
   EXPECT_EQ(lru.order(), (std::vector<uint32_t>{5, 1, 9, 0}));
   EXPECT_EQ(drain(lru), (std::vector<uint32_t>{5, 1, 9, 0}));
   EXPECT_EQ(lru.size(), 0u);
@@ -41,7 +41,7 @@ TEST(LruPolicyTest, EvictsInInsertionOrderWithoutAccesses) {
 
 TEST(LruPolicyTest, AccessMakesMostRecentlyUsed) {
   LruPolicy lru;
-  for (uint32_t b : {0u, 1u, 2u, 3u}) lru.on_insert(b, 1);
+  for (uint32_t b : {0u, 1u, 2u, 3u}) lru.on_insert(b, 1, 0.0);
   lru.on_access(0);  // 1 2 3 0
   lru.on_access(2);  // 1 3 0 2
   lru.on_access(2);  // unchanged (already most recent)
@@ -49,15 +49,15 @@ TEST(LruPolicyTest, AccessMakesMostRecentlyUsed) {
   EXPECT_EQ(lru.order(), (std::vector<uint32_t>{3, 0, 2, 1}));
   ASSERT_EQ(lru.choose_victim(kAny), 3u);
   lru.on_erase(3);
-  lru.on_insert(7, 1);  // 0 2 1 7
-  lru.on_access(0);     // 2 1 7 0
+  lru.on_insert(7, 1, 0.0);  // 0 2 1 7
+  lru.on_access(0);          // 2 1 7 0
   EXPECT_EQ(drain(lru), (std::vector<uint32_t>{2, 1, 7, 0}));
 }
 
 TEST(LruPolicyTest, ChooseVictimDoesNotForgetTheBrick) {
   LruPolicy lru;
-  lru.on_insert(4, 1);
-  lru.on_insert(8, 1);
+  lru.on_insert(4, 1, 0.0);
+  lru.on_insert(8, 1, 0.0);
   EXPECT_EQ(lru.choose_victim(kAny), 4u);
   EXPECT_EQ(lru.choose_victim(kAny), 4u);  // only on_erase forgets
   EXPECT_EQ(lru.size(), 2u);
@@ -65,7 +65,7 @@ TEST(LruPolicyTest, ChooseVictimDoesNotForgetTheBrick) {
 
 TEST(LruPolicyTest, SkipsUnevictableBricks) {
   LruPolicy lru;
-  for (uint32_t b : {0u, 1u, 2u, 3u}) lru.on_insert(b, 1);
+  for (uint32_t b : {0u, 1u, 2u, 3u}) lru.on_insert(b, 1, 0.0);
   std::set<uint32_t> pinned = {0, 1};
   const auto unpinned = [&](uint32_t b) { return pinned.count(b) == 0; };
   EXPECT_EQ(lru.choose_victim(unpinned), 2u);
@@ -78,21 +78,21 @@ TEST(LruPolicyTest, SkipsUnevictableBricks) {
 
 TEST(LruPolicyTest, EraseFromAnywhereKeepsTheOrder) {
   LruPolicy lru;
-  for (uint32_t b = 0; b < 6; ++b) lru.on_insert(b, 1);
+  for (uint32_t b = 0; b < 6; ++b) lru.on_insert(b, 1, 0.0);
   lru.on_erase(3);   // middle
   lru.on_erase(0);   // least recent end
   lru.on_erase(5);   // most recent end
   lru.on_erase(42);  // untracked: no-op
   EXPECT_EQ(lru.order(), (std::vector<uint32_t>{1, 2, 4}));
-  lru.on_insert(3, 1);  // back in, as most recent
+  lru.on_insert(3, 1, 0.0);  // back in, as most recent
   EXPECT_EQ(drain(lru), (std::vector<uint32_t>{1, 2, 4, 3}));
 }
 
 TEST(LruPolicyTest, ReinsertMovesInsteadOfDuplicating) {
   LruPolicy lru;
-  lru.on_insert(1, 1);
-  lru.on_insert(2, 1);
-  lru.on_insert(1, 1);
+  lru.on_insert(1, 1, 0.0);
+  lru.on_insert(2, 1, 0.0);
+  lru.on_insert(1, 1, 0.0);
   EXPECT_EQ(lru.size(), 2u);
   EXPECT_EQ(drain(lru), (std::vector<uint32_t>{2, 1}));
 }
@@ -125,7 +125,7 @@ TEST(LruPolicyTest, MatchesAReferenceOnARandomSequence) {
       if (it != reference.end()) reference.erase(it);
       reference.push_back(brick);
       if (op == 1)
-        lru.on_insert(brick, 1);
+        lru.on_insert(brick, 1, 0.0);
       else
         lru.on_access(brick);
     }

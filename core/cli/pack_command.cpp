@@ -1,5 +1,5 @@
-#include <CLI/CLI.hpp>
 #include <unistd.h>
+#include <CLI/CLI.hpp>
 
 #include <cstdio>
 #include <memory>
@@ -30,7 +30,8 @@ void add_pack_command(CLI::App& app, int& exit_code) {
   cmd->add_option("-o,--output", options->output, "Scene store directory to create")->required();
   cmd->add_option("--brick-tris", options->brick_triangles, "Most triangles in one brick")
       ->capture_default_str();
-  cmd->add_option("--mem-mb", options->memory_mb, "Peak memory bound for packing, MiB")->capture_default_str();
+  cmd->add_option("--mem-mb", options->memory_mb, "Peak memory bound for packing, MiB")
+      ->capture_default_str();
   cmd->add_flag("--force", options->overwrite, "Replace an existing store at the output path");
   auto no_sync = std::make_shared<bool>(false);
   cmd->add_flag("--no-sync", *no_sync, "Skip fsync before the final rename (faster, not durable)");
@@ -46,17 +47,24 @@ void add_pack_command(CLI::App& app, int& exit_code) {
     }
     const PackSummary& s = *result;
     std::printf("packed %llu triangles (%llu degenerate, kept) from %zu input%s into %u bricks\n",
-                static_cast<unsigned long long>(s.triangles), static_cast<unsigned long long>(s.degenerate_triangles),
-                options->inputs.size(), options->inputs.size() == 1 ? "" : "s", s.bricks);
+                static_cast<unsigned long long>(s.triangles),
+                static_cast<unsigned long long>(s.degenerate_triangles), options->inputs.size(),
+                options->inputs.size() == 1 ? "" : "s", s.bricks);
     std::printf("  brick triangles  min %u / median %u / max %u (target <= %u)\n", s.min_brick_triangles,
                 s.median_brick_triangles, s.max_brick_triangles, options->brick_triangles);
     std::printf("  store            %s, %s on disk, upper hierarchy depth %u\n", options->output.c_str(),
                 human_bytes(static_cast<double>(s.bytes_on_disk)).c_str(), s.upper_depth);
-    std::printf("  time             %.2f s, %.2f M tris/s\n", s.seconds, s.triangles / 1e6 / std::max(s.seconds, 1e-9));
+    std::printf("  time             %.2f s, %.2f M tris/s\n", s.seconds,
+                s.triangles / 1e6 / std::max(s.seconds, 1e-9));
     std::printf("  memory           peak RSS %s (bound --mem-mb %llu), out-of-core levels %u, spill %s\n",
                 human_bytes(static_cast<double>(s.peak_rss_bytes)).c_str(),
                 static_cast<unsigned long long>(options->memory_mb), s.out_of_core_levels,
                 human_bytes(static_cast<double>(s.spill_bytes_written)).c_str());
+    const PackPhaseSeconds& p = s.phases;
+    std::printf(
+        "  phases           scan %.2f s, histogram %.2f s, fill %.2f s, bricks %.2f s (waiting for the disk "
+        "%.2f s), finish %.2f s\n",
+        p.scan, p.histogram, p.fill, p.bricks, p.write_wait, p.finish);
     exit_code = 0;
   });
 }

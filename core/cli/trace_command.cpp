@@ -1,8 +1,8 @@
-#include <CLI/CLI.hpp>
 #include <tbb/global_control.h>
+#include <CLI/CLI.hpp>
 
-#include <cstdio>
 #include <algorithm>
+#include <cstdio>
 #include <fstream>
 #include <limits>
 #include <memory>
@@ -24,12 +24,15 @@ struct TraceArgs {
   std::string policy = "lru";
   std::string brick_accel = "embree";
   std::vector<std::string> accel_options;
+  std::string triangle_test;  // shorthand for --accel-opt triangle_test=NAME (bvh only)
+  bool reference = false;     // float64 ground truth: brick structure "reference"
   bool no_reorder = false;
   int threads = 0;
   bool print_stats = false;
   std::string stats_json_path;
   bool strict = false;
   int repeat = 1;
+  std::string trace_out;
 };
 
 Expected<BrickAccelOptions> parse_accel_options(const std::vector<std::string>& items) {
@@ -49,20 +52,44 @@ Expected<BrickAccelOptions> parse_accel_options(const std::vector<std::string>& 
 int run_trace(const TraceArgs& args) {
   std::unique_ptr<tbb::global_control> threads;
   if (args.threads > 0) {
-    threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, args.threads);
+    threads =
+        std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, args.threads);
   }
   auto accel_options = parse_accel_options(args.accel_options);
   if (!accel_options.ok()) return report_command_error("trace", accel_options.status().message());
   if (args.cache_mb == 0 || args.cache_mb > (std::numeric_limits<uint64_t>::max() >> 20)) {
     return report_command_error("trace", "--cache-mb must be between 1 and " +
-                                             std::to_string(std::numeric_limits<uint64_t>::max() >> 20) + ", got " +
-                                             std::to_string(args.cache_mb));
+                                             std::to_string(std::numeric_limits<uint64_t>::max() >> 20) +
+                                             ", got " + std::to_string(args.cache_mb));
   }
   EngineOptions engine_options;
   engine_options.cache_bytes = args.cache_mb << 20;
   engine_options.eviction_policy = args.policy;
   engine_options.brick_accel = args.brick_accel;
   engine_options.accel_options = *accel_options;
+  if (!args.triangle_test.empty()) {
+    if (args.brick_accel != "bvh") {
+      return report_command_error("trace",
+                                  "--triangle-test needs --brick-accel bvh (got '" + args.brick_accel + "')");
+    }
+    if (!engine_options.accel_options.emplace("triangle_test", args.triangle_test).second) {
+      return report_command_error("trace", "--triangle-test and --accel-opt triangle_test=... both given");
+    }
+  }
+  if (args.reference) {
+    if (args.brick_accel != "embree" || !args.accel_options.empty() || !args.triangle_test.empty()) {
+      return report_command_error("trace",
+                                  "--reference chooses the brick structure itself: drop --brick-accel, "
+                                  "--accel-opt and --triangle-test");
+    }
+    engine_options.brick_accel = "reference";
+  }
+  if (!args.trace_out.empty()) {
+    auto trace = AccessTraceWriter::create(args.trace_out,
+                                           "outcore trace " + args.scene + " --rays " + args.rays_path);
+    if (!trace.ok()) return report_command_error("trace", trace.status().message());
+    engine_options.access_trace = std::move(trace).value();
+  }
   auto engine = QueryEngine::open(args.scene, engine_options);
   if (!engine.ok()) return report_command_error("trace", engine.status().message());
   auto rays = read_rays_npy(args.rays_path);
@@ -82,13 +109,19 @@ int run_trace(const TraceArgs& args) {
                                        : (*engine)->intersect(*rays, hits, query_options, &stats);
     if (!status.ok()) return report_command_error("trace", status.message());
     if (args.print_stats) {
-      if (args.repeat > 1) std::printf("run %d/%d (%s cache)\n", r + 1, args.repeat, r == 0 ? "cold" : "warm");
+      if (args.repeat > 1)
+        std::printf("run %d/%d (%s cache)\n", r + 1, args.repeat, r == 0 ? "cold" : "warm");
       std::fputs(stats.to_text().c_str(), stdout);
     }
     runs.push_back(stats);
   }
-  const Status written = args.any_hit ? write_bools_npy(args.output_path, occluded)
-                                      : write_hits_npy(args.output_path, hits);
+  if (engine_options.access_trace) {
+    engine->reset();  // hands the cache's last buffered records to the writer
+    const Status closed = engine_options.access_trace->close();
+    if (!closed.ok()) return report_command_error("trace", closed.message());
+  }
+  const Status written =
+      args.any_hit ? write_bools_npy(args.output_path, occluded) : write_hits_npy(args.output_path, hits);
   if (!written.ok()) return report_command_error("trace", written.message());
   if (!args.stats_json_path.empty()) {
     std::ofstream out(args.stats_json_path);
@@ -111,18 +144,24 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand("trace", "Trace a rays .npy against a scene store, in process");
   cmd->add_option("scene", args->scene, "Scene store directory")->required();
   cmd->add_option("--rays", args->rays_path, "Rays .npy: float32 (N,6) or (N,8)")->required();
-  cmd->add_option("-o,--output", args->output_path, "Hits .npy to write (bool .npy with --any-hit)")->required();
+  cmd->add_option("-o,--output", args->output_path, "Hits .npy to write (bool .npy with --any-hit)")
+      ->required();
   cmd->add_flag("--any-hit", args->any_hit, "Occlusion query: write whether each ray hits anything");
   cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
   cmd->add_option("--accel-opt", args->accel_options, "Brick structure option key=value (repeatable)");
+  cmd->add_option("--triangle-test", args->triangle_test,
+                  "Triangle test of --brick-accel bvh: mt, watertight (default) or double");
+  cmd->add_flag("--reference", args->reference,
+                "Ground truth: float64 brute force per brick (watertight, slow) on the same store");
   cmd->add_flag("--no-reorder", args->no_reorder, "Trace rays one by one in input order (for comparison)");
   cmd->add_option("--threads", args->threads, "Worker threads (default: all cores)");
   cmd->add_flag("--stats", args->print_stats, "Print query statistics");
   cmd->add_option("--stats-json", args->stats_json_path, "Write query statistics as JSON to this file");
   cmd->add_option("--repeat", args->repeat, "Run the batch this many times (first cold, then warm)")
       ->capture_default_str();
+  cmd->add_option("--trace-out", args->trace_out, "Record every brick request to this CSV (for cache-sim)");
   cmd->add_flag("--strict", args->strict, "Invalid rays are an error naming the first one (default: misses)");
   cmd->callback([args, &exit_code] { exit_code = run_trace(*args); });
 }

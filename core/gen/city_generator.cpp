@@ -1,5 +1,6 @@
 #include "core/gen/city_generator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -131,14 +132,24 @@ CopyTransform CityGenerator::copy_transform(int64_t copy) const {
 }
 
 Status CityGenerator::emit(TriangleBatcher& out) const {
+  return emit_range(0, triangle_count(), out);
+}
+
+Status CityGenerator::emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const {
+  last = std::min(last, triangle_count());
+  if (first >= last) return Status::Ok();
   // The current copy's vertices: each unique base vertex is transformed once
   // per copy, and the transform is a pure function of the vertex, so this is
   // bit-identical to transforming every triangle corner.
+  const uint64_t base_count = base_.triangle_count();
   std::vector<Vec3f> world(base_.vertices.size());
-  for (int64_t copy = 0; copy < config_.copies; ++copy) {
-    const CopyTransform t = copy_transform(copy);
+  for (uint64_t copy = first / base_count; copy * base_count < last; ++copy) {
+    const CopyTransform t = copy_transform(static_cast<int64_t>(copy));
     for (std::size_t i = 0; i < world.size(); ++i) world[i] = t.apply(base_.vertices[i]);
-    for (const auto& tri : base_.triangles) {
+    const uint64_t begin = std::max(first, copy * base_count) - copy * base_count;
+    const uint64_t end = std::min(last, (copy + 1) * base_count) - copy * base_count;
+    for (uint64_t k = begin; k < end; ++k) {
+      const auto& tri = base_.triangles[k];
       OUTCORE_RETURN_IF_ERROR(out.add(Triangle{world[tri[0]], world[tri[1]], world[tri[2]]}));
     }
   }

@@ -66,6 +66,10 @@ class CityGenerator final : public Generator {
     return static_cast<uint64_t>(config_.copies) * base_.triangle_count();
   }
   Status emit(TriangleBatcher& out) const override;
+  // By copies: a range transforms only the copies it touches.
+  Status emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const override;
+  bool has_fast_ranges() const override { return true; }
+  uint64_t range_granularity() const override { return base_.triangle_count(); }
 
   // The base mesh exactly as `of` streamed it (triangle k = base().triangle(k)).
   const IndexedMesh& base() const { return base_; }

@@ -36,6 +36,16 @@ class Generator : public TriangleSource {
   virtual uint64_t triangle_count() const = 0;
   // Appends the triangles, in primitive-id order, to `out` (without finishing it).
   virtual Status emit(TriangleBatcher& out) const = 0;
+  // Appends triangles [first, last) of primitive-id order (last clamped to
+  // triangle_count()), bit-identical to those of emit(): disjoint ranges can
+  // be generated on several threads and concatenated. The default generates
+  // everything and keeps the range, so it costs O(triangle_count()).
+  virtual Status emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const;
+  // True when emit_range costs O(last - first) plus a small setup, so callers
+  // may cut the generator into many ranges.
+  virtual bool has_fast_ranges() const { return false; }
+  // Ranges starting at multiples of this are cheapest (e.g. one city copy).
+  virtual uint64_t range_granularity() const { return 1; }
 
  protected:
   explicit Generator(std::string description) : description_(std::move(description)) {}

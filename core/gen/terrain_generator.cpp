@@ -1,5 +1,6 @@
 #include "core/gen/terrain_generator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -97,8 +98,15 @@ double TerrainGenerator::height_at(int i, int j) const {
 }
 
 Status TerrainGenerator::emit(TriangleBatcher& out) const {
+  return emit_range(0, triangle_count(), out);
+}
+
+Status TerrainGenerator::emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const {
   const TerrainConfig& c = config_;
+  last = std::min(last, triangle_count());
+  if (first >= last) return Status::Ok();
   const auto n = static_cast<std::size_t>(c.n);
+  const uint64_t per_row = 2 * static_cast<uint64_t>(n);
   const auto coord = [&](int k) {
     return (static_cast<double>(k) / static_cast<double>(c.n) - 0.5) * c.size;
   };
@@ -109,15 +117,19 @@ Status TerrainGenerator::emit(TriangleBatcher& out) const {
     const double z = coord(j);
     for (std::size_t i = 0; i <= n; ++i) row[i] = to_vertex(Vec3d(coord(static_cast<int>(i)), heights[i], z));
   };
-  make_row(0, lower);
-  for (int j = 0; j < c.n; ++j) {
+  const int first_row = static_cast<int>(first / per_row);
+  make_row(first_row, lower);
+  for (int j = first_row; static_cast<uint64_t>(j) * per_row < last; ++j) {
     make_row(j + 1, upper);
-    for (std::size_t i = 0; i < n; ++i) {
+    const uint64_t row_start = static_cast<uint64_t>(j) * per_row;
+    const uint64_t begin = std::max(first, row_start) - row_start,
+                   end = std::min(last, row_start + per_row) - row_start;
+    for (uint64_t k = begin; k < end; ++k) {
       // p00 = (i, j), p10 = (i+1, j), p01 = (i, j+1), p11 = (i+1, j+1), i along x and
       // j along z: cross(p01 - p00, p11 - p00) ~ z x x = +y, so both are +y facing.
+      const std::size_t i = static_cast<std::size_t>(k / 2);
       const Vec3f p00 = lower[i], p10 = lower[i + 1], p01 = upper[i], p11 = upper[i + 1];
-      OUTCORE_RETURN_IF_ERROR(out.add(Triangle{p00, p01, p11}));
-      OUTCORE_RETURN_IF_ERROR(out.add(Triangle{p00, p11, p10}));
+      OUTCORE_RETURN_IF_ERROR(out.add(k % 2 == 0 ? Triangle{p00, p01, p11} : Triangle{p00, p11, p10}));
     }
     lower.swap(upper);
   }

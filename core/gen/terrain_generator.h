@@ -44,6 +44,10 @@ class TerrainGenerator final : public Generator {
     return 2ull * static_cast<uint64_t>(config_.n) * static_cast<uint64_t>(config_.n);
   }
   Status emit(TriangleBatcher& out) const override;
+  // By rows of 2n triangles: a range computes only the rows it touches.
+  Status emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const override;
+  bool has_fast_ranges() const override { return true; }
+  uint64_t range_granularity() const override { return 2 * static_cast<uint64_t>(config_.n); }
 
   // Height (y) of grid vertex (i, j), 0 <= i, j <= n; the emitted vertices use
   // exactly this value (rounded to float).

@@ -1,9 +1,11 @@
 // Brute-force float64 reference for ray queries: every fast path (brick
 // structures, the engine, the server) is tested against it. Möller–Trumbore in
 // double over every triangle, the same segment rule as Embree (a hit at t
-// counts when tnear < t <= tfar; edges and vertices count as inside), and the
-// same tie rule as hit_is_better() (equal t -> smaller (geometry_id,
-// primitive_id)). Triangles that are degenerate in float64 are never hit.
+// counts when tnear < t <= tfar; edges and vertices count as inside), and
+// hit_is_better()'s tie rule over all triangles (equal t -> smaller
+// (geometry_id, primitive_id)); fast paths may pick another triangle at a
+// true tie (equal float t, e.g. inside one Embree brick), which tests allow.
+// Triangles that are degenerate in float64 are never hit.
 //
 // Thread-safety: pure functions.
 #pragma once

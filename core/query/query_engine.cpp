@@ -14,12 +14,16 @@ namespace outcore {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
 
 // Upcoming bricks kept per ray; more are found by re-traversal when used up.
 constexpr std::size_t kWindow = 4;
 // Rays per task when tracing inside a brick.
 constexpr std::size_t kRayGrain = 512;
+// Rays per task when validating a batch.
+constexpr std::size_t kCheckGrain = 16384;
 
 struct RayProgress {
   std::array<BrickKey, kWindow> window;
@@ -54,7 +58,9 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   if (options.cache_bytes == 0) return invalid_argument("the cache budget must be positive");
   OUTCORE_ASSIGN_OR_RETURN(auto builder, make_brick_builder(options.brick_accel, options.accel_options));
   OUTCORE_ASSIGN_OR_RETURN(auto policy, make_eviction_policy(options.eviction_policy));
-  auto cache = std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
+  auto cache =
+      std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
+  if (options.access_trace) cache->set_access_trace(options.access_trace);
   return std::unique_ptr<QueryEngine>(new QueryEngine(std::move(store), std::move(cache)));
 }
 
@@ -64,8 +70,8 @@ Status QueryEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits, co
   return run<QueryKind::kClosestHit>(rays, hits.data(), nullptr, options, stats);
 }
 
-Status QueryEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded, const QueryOptions& options,
-                             QueryStats* stats) {
+Status QueryEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded,
+                             const QueryOptions& options, QueryStats* stats) {
   if (occluded.size() != rays.size()) return invalid_argument("occlusion flags and rays differ in length");
   return run<QueryKind::kAnyHit>(rays, nullptr, occluded.data(), options, stats);
 }
@@ -80,19 +86,34 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   QueryStats stats;
   stats.rays = n;
 
+  // Validation and output reset, in parallel chunks; the first bad ray of
+  // each chunk is kept so that strict mode names the first of the batch.
   std::vector<uint8_t> valid(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const char* problem = ray_problem(rays[i]);
-    valid[i] = problem == nullptr;
-    if (problem != nullptr) {
-      if (options.strict) return invalid_argument("ray " + std::to_string(i) + ": " + problem);
-      ++stats.invalid_rays;
+  const std::size_t check_chunks = (n + kCheckGrain - 1) / kCheckGrain;
+  std::vector<uint64_t> chunk_invalid(check_chunks, 0);
+  std::vector<std::size_t> chunk_first_bad(check_chunks, n);
+  tbb::parallel_for(std::size_t{0}, check_chunks, [&](std::size_t c) {
+    const std::size_t end = std::min(n, (c + 1) * kCheckGrain);
+    for (std::size_t i = c * kCheckGrain; i < end; ++i) {
+      const bool ok = ray_problem(rays[i]) == nullptr;
+      valid[i] = ok;
+      if (!ok) {
+        if (chunk_first_bad[c] == n) chunk_first_bad[c] = i;
+        ++chunk_invalid[c];
+      }
+      if constexpr (kKind == QueryKind::kClosestHit) {
+        hits[i] = Hit{};
+      } else {
+        occluded[i] = 0;
+      }
     }
-    if constexpr (kKind == QueryKind::kClosestHit) {
-      hits[i] = Hit{};
-    } else {
-      occluded[i] = 0;
+  });
+  for (std::size_t c = 0; c < check_chunks; ++c) {
+    if (chunk_first_bad[c] != n && options.strict) {
+      const std::size_t i = chunk_first_bad[c];
+      return invalid_argument("ray " + std::to_string(i) + ": " + ray_problem(rays[i]));
     }
+    stats.invalid_rays += chunk_invalid[c];
   }
 
   // The largest distance at which a brick can still matter for ray i.
@@ -125,7 +146,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       return key.brick;
     }
     if (p.complete) return kInvalidId;
-    p.count = static_cast<uint8_t>(next_bricks(upper, SlabRay(rays[i]), rays[i].tnear, limit, p.last, p.window, nodes));
+    p.count = static_cast<uint8_t>(
+        next_bricks(upper, SlabRay(rays[i]), rays[i].tnear, limit, p.last, p.window, nodes));
     p.complete = p.count < kWindow;
     p.next = 0;
     if (p.count == 0) return kInvalidId;
@@ -192,19 +214,91 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     first = {};
     stats.seconds_upper = seconds_since(t_upper);
 
-    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> moved;  // per chunk: (next brick, ray)
+    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> moved;  // per task: (next brick, ray)
+    // One task of a wave: a chunk of one resident brick's queue.
+    struct WaveTask {
+      uint32_t brick;
+      uint32_t queue;  // index into wave_batches
+      std::size_t begin, end;
+      uint64_t nodes = 0;
+      double build_seconds = 0;
+      bool acquired = false, was_hit = false;
+      Status status;
+    };
+    std::vector<WaveTask> tasks;
+    std::vector<std::vector<uint32_t>> wave_batches;
+    std::vector<uint32_t> resident_now, not_resident;
     while (!waiting.empty()) {
-      // Resident bricks first (no build), then the longest queue.
-      std::size_t best = 0;
-      bool best_resident = cache_->is_resident(waiting[0]);
-      for (std::size_t k = 1; k < waiting.size(); ++k) {
-        const uint32_t b = waiting[k];
-        const bool resident = cache_->is_resident(b);
-        if (resident != best_resident ? resident
-                                      : queues[b].size() > queues[waiting[best]].size()) {
-          best = k;
-          best_resident = resident;
+      // Wave: every waiting brick that is resident now is traced at once, in
+      // parallel over (brick, chunk) tasks — no build to wait for, and with
+      // many bricks and short queues (a large scene) parallelism across
+      // bricks is what keeps both cores busy. Each task pins its brick only
+      // while it traces one chunk, never waits on the cache while pinned, and
+      // runs no nested parallel loop, so tasks cannot deadlock on pins.
+      resident_now.clear();
+      not_resident.clear();
+      for (const uint32_t b : waiting) (cache_->is_resident(b) ? resident_now : not_resident).push_back(b);
+      if (!resident_now.empty()) {
+        const auto t_brick = Clock::now();
+        std::sort(resident_now.begin(), resident_now.end());  // a reproducible task order
+        tasks.clear();
+        wave_batches.resize(resident_now.size());
+        for (std::size_t q = 0; q < resident_now.size(); ++q) {
+          const uint32_t b = resident_now[q];
+          is_waiting[b] = 0;
+          wave_batches[q] = std::move(queues[b]);
+          queues[b] = {};
+          stats.brick_visits += wave_batches[q].size();
+          for (std::size_t begin = 0; begin < wave_batches[q].size(); begin += kRayGrain) {
+            WaveTask task;
+            task.brick = b;
+            task.queue = static_cast<uint32_t>(q);
+            task.begin = begin;
+            task.end = std::min(wave_batches[q].size(), begin + kRayGrain);
+            tasks.push_back(std::move(task));
+          }
         }
+        waiting.swap(not_resident);
+        moved.resize(std::max(moved.size(), tasks.size()));
+        tbb::parallel_for(std::size_t{0}, tasks.size(), [&](std::size_t t) {
+          WaveTask& task = tasks[t];
+          moved[t].clear();
+          const auto t0 = Clock::now();
+          auto acquired = cache_->acquire(task.brick);
+          task.build_seconds = seconds_since(t0);
+          if (!acquired.ok()) {
+            task.status = acquired.status();
+            return;
+          }
+          const PinnedBrick pin = std::move(acquired).value();
+          task.acquired = true;
+          task.was_hit = pin.was_hit();
+          const std::vector<uint32_t>& batch = wave_batches[task.queue];
+          const std::span<const uint32_t> ids(batch.data() + task.begin, task.end - task.begin);
+          trace(pin.accel(), ids);
+          for (const uint32_t ray : ids) {
+            const uint32_t next = advance(ray, task.nodes);
+            if (next != kInvalidId) moved[t].emplace_back(next, ray);
+          }
+        });
+        for (std::size_t t = 0; t < tasks.size(); ++t) {
+          const WaveTask& task = tasks[t];
+          OUTCORE_RETURN_IF_ERROR(task.status);
+          stats.upper_nodes_visited += task.nodes;
+          stats.seconds_build += task.build_seconds;
+          ++stats.brick_acquisitions;
+          ++(task.was_hit ? stats.cache_hits : stats.cache_misses);
+          for (const auto& [next, ray] : moved[t]) enqueue(next, ray);
+        }
+        stats.seconds_brick += seconds_since(t_brick);
+        continue;
+      }
+
+      // Nothing waiting is resident: build the longest queue's brick, then
+      // trace its rays in parallel chunks.
+      std::size_t best = 0;
+      for (std::size_t k = 1; k < waiting.size(); ++k) {
+        if (queues[waiting[k]].size() > queues[waiting[best]].size()) best = k;
       }
       const uint32_t brick = waiting[best];
       waiting[best] = waiting.back();
@@ -218,11 +312,12 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       const auto t_brick = Clock::now();
       const BrickAccel& accel = pin.accel();
       const std::size_t batch_chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
-      moved.assign(batch_chunks, {});
+      moved.resize(std::max(moved.size(), batch_chunks));
       chunk_nodes.assign(batch_chunks, 0);
       tbb::parallel_for(std::size_t{0}, batch_chunks, [&](std::size_t c) {
         const std::size_t begin = c * kRayGrain, end = std::min(batch.size(), begin + kRayGrain);
         const std::span<const uint32_t> ids(batch.data() + begin, end - begin);
+        moved[c].clear();
         trace(accel, ids);
         uint64_t nodes = 0;
         for (const uint32_t ray : ids) {
@@ -263,7 +358,9 @@ std::string QueryStats::to_json() const {
   j.begin_object();
   j.field("rays", rays).field("invalid_rays", invalid_rays).field("rays_hit", rays_hit);
   j.field("upper_nodes_visited", upper_nodes_visited).field("brick_visits", brick_visits);
-  j.field("brick_acquisitions", brick_acquisitions).field("cache_hits", cache_hits).field("cache_misses", cache_misses);
+  j.field("brick_acquisitions", brick_acquisitions)
+      .field("cache_hits", cache_hits)
+      .field("cache_misses", cache_misses);
   j.field("brick_builds", brick_builds).field("evictions", evictions);
   j.field("peak_bytes_resident", peak_bytes_resident).field("cache_budget_bytes", cache_budget_bytes);
   j.key("seconds").begin_object();
@@ -276,27 +373,28 @@ std::string QueryStats::to_json() const {
 
 std::string QueryStats::to_text() const {
   char buf[1024];
-  std::snprintf(buf, sizeof buf,
-                "rays %llu (%llu hit, %llu invalid) in %.3f s = %.2f M rays/s\n"
-                "  upper: %llu nodes visited, %.3f s first pass\n"
-                "  bricks: %llu ray visits, %llu acquisitions (%llu hits, %llu misses), %llu builds, %llu "
-                "evictions\n"
-                "  cache: peak %.1f MiB of %.1f MiB budget\n"
-                "  time: build/wait %.3f s, brick traversal %.3f s\n",
-                static_cast<unsigned long long>(rays), static_cast<unsigned long long>(rays_hit),
-                static_cast<unsigned long long>(invalid_rays), seconds_total,
-                seconds_total > 0 ? rays / seconds_total / 1e6 : 0.0,
-                static_cast<unsigned long long>(upper_nodes_visited), seconds_upper,
-                static_cast<unsigned long long>(brick_visits), static_cast<unsigned long long>(brick_acquisitions),
-                static_cast<unsigned long long>(cache_hits), static_cast<unsigned long long>(cache_misses),
-                static_cast<unsigned long long>(brick_builds), static_cast<unsigned long long>(evictions),
-                peak_bytes_resident / 1048576.0, cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
+  std::snprintf(
+      buf, sizeof buf,
+      "rays %llu (%llu hit, %llu invalid) in %.3f s = %.2f M rays/s\n"
+      "  upper: %llu nodes visited, %.3f s first pass\n"
+      "  bricks: %llu ray visits, %llu acquisitions (%llu hits, %llu misses), %llu builds, %llu "
+      "evictions\n"
+      "  cache: peak %.1f MiB of %.1f MiB budget\n"
+      "  time: build/wait %.3f s, brick traversal %.3f s\n",
+      static_cast<unsigned long long>(rays), static_cast<unsigned long long>(rays_hit),
+      static_cast<unsigned long long>(invalid_rays), seconds_total,
+      seconds_total > 0 ? rays / seconds_total / 1e6 : 0.0,
+      static_cast<unsigned long long>(upper_nodes_visited), seconds_upper,
+      static_cast<unsigned long long>(brick_visits), static_cast<unsigned long long>(brick_acquisitions),
+      static_cast<unsigned long long>(cache_hits), static_cast<unsigned long long>(cache_misses),
+      static_cast<unsigned long long>(brick_builds), static_cast<unsigned long long>(evictions),
+      peak_bytes_resident / 1048576.0, cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
   return buf;
 }
 
-template Status QueryEngine::run<QueryKind::kClosestHit>(std::span<const Ray>, Hit*, uint8_t*, const QueryOptions&,
-                                                         QueryStats*);
-template Status QueryEngine::run<QueryKind::kAnyHit>(std::span<const Ray>, Hit*, uint8_t*, const QueryOptions&,
-                                                     QueryStats*);
+template Status QueryEngine::run<QueryKind::kClosestHit>(std::span<const Ray>, Hit*, uint8_t*,
+                                                         const QueryOptions&, QueryStats*);
+template Status QueryEngine::run<QueryKind::kAnyHit>(std::span<const Ray>, Hit*, uint8_t*,
+                                                     const QueryOptions&, QueryStats*);
 
 }  // namespace outcore

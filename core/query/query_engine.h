@@ -37,6 +37,9 @@ struct EngineOptions {
   std::string eviction_policy = "lru";
   std::string brick_accel = "embree";
   BrickAccelOptions accel_options;
+  // When set, the cache records every brick acquisition into it
+  // (core/cache/access_trace.h); close it after the engine is destroyed.
+  std::shared_ptr<AccessTraceWriter> access_trace;
 };
 
 struct QueryOptions {

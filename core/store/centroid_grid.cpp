@@ -29,8 +29,10 @@ CentroidGrid::CentroidGrid(const Aabb& centroid_bounds, uint32_t max_cells) : bo
     }
   }
   // Rounding can overshoot the cell budget a little; shrink the largest axis.
-  while (static_cast<uint64_t>(resolution_[0]) * resolution_[1] * resolution_[2] > std::max<uint32_t>(1, max_cells)) {
-    const int axis = static_cast<int>(std::max_element(resolution_.begin(), resolution_.end()) - resolution_.begin());
+  while (static_cast<uint64_t>(resolution_[0]) * resolution_[1] * resolution_[2] >
+         std::max<uint32_t>(1, max_cells)) {
+    const int axis =
+        static_cast<int>(std::max_element(resolution_.begin(), resolution_.end()) - resolution_.begin());
     resolution_[axis] = std::max<uint32_t>(1, resolution_[axis] / 2);
     scale_[axis] = static_cast<float>(resolution_[axis] / static_cast<double>(extent[axis]));
   }
@@ -44,8 +46,12 @@ struct CellBox {
 
 class GroupPlanner {
  public:
-  GroupPlanner(const CentroidGrid& grid, std::span<const CellStats> cells, uint64_t max_group)
-      : res_(grid.resolution()), cells_(cells), max_group_(max_group) {
+  GroupPlanner(const CentroidGrid& grid, std::span<const CellStats> cells, uint64_t max_group,
+               uint64_t cost_unit)
+      : res_(grid.resolution()),
+        cells_(cells),
+        max_group_(max_group),
+        unit_(std::max<uint64_t>(1, cost_unit)) {
     plan_.cell_to_group.assign(cells.size(), GroupPlan::kNoGroup);
   }
 
@@ -55,11 +61,11 @@ class GroupPlanner {
   }
 
  private:
-  // Triangles plus half a group's worth per group the side will need: fuller
-  // groups mean fewer passes over the input.
+  // Triangles plus half a unit's worth per unit the side will need: with
+  // whole groups as the unit, fuller groups mean fewer passes over the input.
   double side_cost(uint64_t count) const {
-    const uint64_t groups = (count + max_group_ - 1) / max_group_;
-    return static_cast<double>(count) + 0.5 * static_cast<double>(max_group_) * static_cast<double>(groups);
+    const uint64_t units = (count + unit_ - 1) / unit_;
+    return static_cast<double>(count) + 0.5 * static_cast<double>(unit_) * static_cast<double>(units);
   }
 
   uint32_t index(uint32_t x, uint32_t y, uint32_t z) const { return (z * res_[1] + y) * res_[0] + x; }
@@ -131,13 +137,16 @@ class GroupPlanner {
   std::array<uint32_t, 3> res_;
   std::span<const CellStats> cells_;
   uint64_t max_group_;
+  uint64_t unit_;
   GroupPlan plan_;
 };
 
 }  // namespace
 
-GroupPlan plan_groups(const CentroidGrid& grid, std::span<const CellStats> cells, uint64_t max_group_triangles) {
-  return GroupPlanner(grid, cells, max_group_triangles).run();
+GroupPlan plan_groups(const CentroidGrid& grid, std::span<const CellStats> cells,
+                      uint64_t max_group_triangles, uint64_t cost_unit) {
+  return GroupPlanner(grid, cells, max_group_triangles, cost_unit > 0 ? cost_unit : max_group_triangles)
+      .run();
 }
 
 }  // namespace outcore

@@ -23,13 +23,18 @@ class CentroidGrid {
   CentroidGrid(const Aabb& centroid_bounds, uint32_t max_cells);
 
   uint32_t cell_of(const Vec3f& centroid) const {
-    uint32_t index[3];
+    const std::array<uint32_t, 3> index = cell_coords(centroid);
+    return (index[2] * resolution_[1] + index[1]) * resolution_[0] + index[0];
+  }
+  // The cell's (x, y, z) indices; cell_of() flattens them x fastest.
+  std::array<uint32_t, 3> cell_coords(const Vec3f& centroid) const {
+    std::array<uint32_t, 3> index;
     for (int axis = 0; axis < 3; ++axis) {
       const float t = (centroid[axis] - bounds_.lo[axis]) * scale_[axis];
       const int k = static_cast<int>(t);
       index[axis] = static_cast<uint32_t>(std::clamp(k, 0, static_cast<int>(resolution_[axis]) - 1));
     }
-    return (index[2] * resolution_[1] + index[1]) * resolution_[0] + index[0];
+    return index;
   }
   uint32_t cell_count() const { return resolution_[0] * resolution_[1] * resolution_[2]; }
   const std::array<uint32_t, 3>& resolution() const { return resolution_; }
@@ -55,7 +60,11 @@ struct GroupPlan {
 };
 
 // Groups hold at most max_group_triangles unless a single cell holds more (the
-// packer then recurses into that group with a finer grid).
-GroupPlan plan_groups(const CentroidGrid& grid, std::span<const CellStats> cells, uint64_t max_group_triangles);
+// packer then recurses into that group with a finer grid). The SAH charges
+// each side half a cost_unit per cost_unit-sized piece it will need (0 means
+// max_group_triangles): groups come out full, while the brick size as the unit
+// makes cuts fall where bricks would split anyway (between objects).
+GroupPlan plan_groups(const CentroidGrid& grid, std::span<const CellStats> cells,
+                      uint64_t max_group_triangles, uint64_t cost_unit = 0);
 
 }  // namespace outcore

@@ -41,6 +41,18 @@ struct PackOptions {
   uint64_t max_group_triangles = 0;
 };
 
+// Wall seconds per phase. With generated inputs, generation and filtering use
+// every core; partitioning overlaps checksumming and writing (bricks), and the
+// kernel writes to disk in the background until the final sync (finish).
+struct PackPhaseSeconds {
+  double scan = 0;        // counts, bounds, degenerates
+  double histogram = 0;   // centroid grid counts
+  double fill = 0;        // generating/reading triangles into their in-memory groups (and spills)
+  double bricks = 0;      // partitioning groups into bricks, checksums, handing bytes to the writer
+  double write_wait = 0;  // part of bricks: waiting for the writer because the disk lags
+  double finish = 0;      // flush, fsync, manifest, rename
+};
+
 struct PackSummary {
   uint64_t triangles = 0;
   uint64_t degenerate_triangles = 0;
@@ -54,6 +66,7 @@ struct PackSummary {
   uint32_t out_of_core_levels = 0;   // 0: in memory; 1: one grid pass; more: recursion
   double seconds = 0.0;
   uint64_t peak_rss_bytes = 0;
+  PackPhaseSeconds phases;
 };
 
 Expected<PackSummary> pack_scene(const PackOptions& options);

@@ -1,6 +1,7 @@
 #include "core/store/scene_packer.h"
 
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <atomic>
@@ -360,6 +361,72 @@ TEST_F(ScenePackerOutOfCore, IdenticalCentroidsPlusOneOutlierBeyondMemoryBudgetR
   pack_and_check({obj}, 1000, kSmallMemoryMb, &summary);
   EXPECT_GE(summary.out_of_core_levels, 1u);
   EXPECT_EQ(summary.triangles, 400'001u);
+}
+
+TEST_F(ScenePackerOutOfCore, SeveralGeneratedInputsOutOfCoreKeepTheirIdsAndRoundTrip) {
+  PackSummary summary;
+  pack_and_check({"gen:terrain?n=300", "gen:city?of=(gen:sphere?level=3)&copies=500"}, 700, kSmallMemoryMb,
+                 &summary);
+  EXPECT_GE(summary.out_of_core_levels, 1u);
+  EXPECT_EQ(summary.spill_bytes_written, 0u);  // generated groups are regenerated, never spilled
+}
+
+TEST_F(ScenePackerOutOfCore, GeneratedIdenticalCentroidsBeyondTheGroupCapAreChunkedAndRoundTrip) {
+  // A city of one copy of a mesh whose triangles all share a centroid: no grid
+  // cell can split them, with or without an outlier that gives the grid extent.
+  for (const bool outlier : {false, true}) {
+    TempDir inputs;
+    const std::string obj = inputs.file("same.obj");
+    write_text_file(obj, obj_with_repeated_triangle(400'000, outlier));
+    PackSummary summary;
+    pack_and_check({"gen:city?of=" + obj + "&copies=1&spacing=1"}, 1000, kSmallMemoryMb, &summary);
+    EXPECT_GE(summary.out_of_core_levels, 1u);
+    EXPECT_EQ(summary.triangles, outlier ? 400'001u : 400'000u);
+  }
+}
+
+// ---- determinism ------------------------------------------------------------------
+
+// Generated inputs are generated and partitioned on all cores; the store must
+// not depend on how many there are.
+TEST(ScenePackerDeterminism, GeneratedStoresAreByteIdenticalOnOneThreadAndOnAllThreads) {
+  struct Case {
+    std::vector<std::string> inputs;
+    uint32_t brick_triangles;
+    uint64_t max_group_triangles;  // 0: in memory
+  };
+  const std::vector<Case> cases{
+      {{"gen:city?of=(gen:sphere?level=3)&copies=700"}, 2000, 0},        // one group, grid subgroups
+      {{"gen:city?of=(gen:sphere?level=3)&copies=700"}, 2000, 150'000},  // several groups
+      {{"gen:terrain?n=200", "gen:city?of=(gen:sphere?level=2)&copies=300"}, 500, 40'000},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.inputs.front() + ", group cap " + std::to_string(c.max_group_triangles));
+    TempDir dir;
+    std::map<std::string, std::string> stores[2];
+    for (int run = 0; run < 2; ++run) {
+      std::unique_ptr<tbb::global_control> one_thread;
+      if (run == 0) {
+        one_thread = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, 1);
+      }
+      PackOptions options = options_for(c.inputs, dir.file("s" + std::to_string(run)), c.brick_triangles, 64);
+      options.max_group_triangles = c.max_group_triangles;
+      const auto summary = pack_scene(options);
+      ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+      if (c.max_group_triangles > 0) {
+        EXPECT_GE(summary->out_of_core_levels, 1u);
+      }
+      stores[run] = snapshot(dir.file("s" + std::to_string(run)));
+    }
+    ASSERT_EQ(stores[0].size(), 2u);
+    for (const auto& [name, bytes] : stores[0]) {
+      EXPECT_TRUE(stores[1][name] == bytes) << name << " differs between 1 thread and all threads";
+    }
+    PackSummary summary;
+    g_max_group_triangles = c.max_group_triangles;
+    pack_and_check(c.inputs, c.brick_triangles, 64, &summary);
+    g_max_group_triangles = 0;
+  }
 }
 
 // ---- ids ------------------------------------------------------------------------

@@ -7,7 +7,8 @@
 // where traversal takes the leaf work as a callback).
 //
 // Robustness: slab tests are conservative (Ize 2013): the exit distance is
-// scaled up and the entry distance down by 1 +/- 2*gamma(3), and a slab whose
+// scaled up and the entry distance down by 1 +/- 2^-18 (more than Ize's
+// 2*gamma(3), see kSlabWiden), and a slab whose
 // product is NaN (origin on a slab plane with a zero direction component)
 // constrains nothing, so no box test loses a hit the triangle test would find.
 //
@@ -47,18 +48,37 @@ struct SlabRay {
 };
 
 namespace detail {
-// 2*gamma(3) with gamma(n) = n*eps/(1-n*eps), eps = 2^-24.
-inline constexpr float kSlabWiden = 2.0f * (3.0f * 5.9604645e-8f) / (1.0f - 3.0f * 5.9604645e-8f);
+// Ize's 2*gamma(3) (gamma(n) = n*eps/(1-n*eps), eps = 2^-24, about 3.6e-7)
+// covers the slab test's own rounding, but not the watertight triangle
+// tests', which may accept a ray whose exact line passes a few ulps outside
+// the triangle, and so outside its brick's box. 2^-18 (64 ulps) is the
+// margin the bvh brick structure uses inside a brick for that reason
+// (core/accel/bvh/bvh_traversal.h); the same here keeps seams between bricks
+// no weaker than a brick's inside (the stress suite's seam cases: tiny
+// bricks answer bitwise like one brick). The cost is a few more brick
+// candidates for rays passing within 4e-6 relative of a brick's box.
+inline constexpr float kSlabWiden = 0x1p-18f;
+
+// std::fmin / std::fmax semantics (a NaN operand yields the other one) as
+// selects the compiler inlines: without -ffast-math GCC calls libm's fminf /
+// fmaxf through the PLT, which cost about 10% of a whole trace.
+inline float fmin_inline(float a, float b) {
+  return b != b ? a : (a < b ? a : b);
+}
+inline float fmax_inline(float a, float b) {
+  return b != b ? a : (a > b ? a : b);
+}
 
 // Conservative [entry, exit] of the ray against the box, clipped to [tmin, tmax];
 // true when the segment touches the box and the exit is at least min_exit.
-inline bool slab_test(const SlabRay& ray, const Aabb& box, float tmin, float tmax, float min_exit, float& entry) {
+inline bool slab_test(const SlabRay& ray, const Aabb& box, float tmin, float tmax, float min_exit,
+                      float& entry) {
   float lo = tmin, hi = tmax;
   for (int axis = 0; axis < 3; ++axis) {
     const float t0 = (box.lo[axis] - ray.origin[axis]) * ray.inverse_direction[axis];
     const float t1 = (box.hi[axis] - ray.origin[axis]) * ray.inverse_direction[axis];
-    const float near = std::fmin(t0, t1);
-    const float far = std::fmax(t0, t1);
+    const float near = fmin_inline(t0, t1);
+    const float far = fmax_inline(t0, t1);
     // fmin/fmax return the other operand for one NaN; both are NaN only for
     // 0 * inf (origin on the slab plane, direction parallel to it), and then
     // the comparisons below are false: the slab constrains nothing.
@@ -76,8 +96,8 @@ inline bool slab_test(const SlabRay& ray, const Aabb& box, float tmin, float tma
 // greater than `after` among the bricks whose box the ray's segment
 // [tmin, tmax] touches; returns how many were found. Counts visited nodes.
 template <std::size_t N>
-uint32_t next_bricks(const UpperHierarchy& upper, const SlabRay& ray, float tmin, float tmax, const BrickKey& after,
-                     std::array<BrickKey, N>& window, uint64_t& nodes_visited) {
+uint32_t next_bricks(const UpperHierarchy& upper, const SlabRay& ray, float tmin, float tmax,
+                     const BrickKey& after, std::array<BrickKey, N>& window, uint64_t& nodes_visited) {
   uint32_t found = 0;
   if (upper.nodes.empty()) return 0;
   std::array<uint32_t, kMaxUpperDepth + 1> stack;

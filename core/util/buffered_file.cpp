@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cstring>
 
 namespace outcore {
@@ -65,7 +66,11 @@ void BufferedFileWriter::background_loop() {
 Status BufferedFileWriter::wait_for_background_write() {
   if (!writer_thread_.joinable()) return Status::Ok();
   std::unique_lock lock(mutex_);
-  cv_.wait(lock, [&] { return !has_work_; });
+  if (has_work_) {
+    const auto start = std::chrono::steady_clock::now();
+    cv_.wait(lock, [&] { return !has_work_; });
+    wait_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
   return background_status_;
 }
 

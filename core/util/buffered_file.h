@@ -39,6 +39,8 @@ class BufferedFileWriter {
   // Flushes; with sync, also fsync()s so the data is durable before a rename.
   Status close(bool sync);
   const std::string& path() const { return path_; }
+  // Seconds append() spent waiting for the background write (the disk lagging).
+  double wait_seconds() const { return wait_seconds_; }
 
  private:
   Status flush_buffer();
@@ -50,6 +52,7 @@ class BufferedFileWriter {
   std::vector<char> buffer_;
   std::size_t capacity_ = 0;
   uint64_t written_ = 0;
+  double wait_seconds_ = 0.0;
 
   // Asynchronous mode: in_flight_ is being written by writer_thread_.
   std::thread writer_thread_;

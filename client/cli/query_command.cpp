@@ -1,0 +1,93 @@
+#include "client/cli/query_command.h"
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "client/cpp/scene_client.h"
+#include "core/cli/commands.h"
+#include "core/io/npy.h"
+
+namespace outcore {
+
+namespace {
+
+struct QueryArgs {
+  std::string server = "127.0.0.1:50051";
+  std::string rays_path;
+  std::string output_path;
+  bool any_hit = false;
+  double deadline_seconds = 0;
+  bool strict = false;
+  bool no_reorder = false;
+  uint64_t chunk_rays = 0;
+  bool print_stats = false;
+};
+
+int run_query(const QueryArgs& args) {
+  if (args.deadline_seconds < 0) return report_command_error("query", "--deadline-s must be >= 0 (0: none)");
+  auto rays = read_rays_npy(args.rays_path);
+  if (!rays.ok()) return report_command_error("query", rays.status().message());
+  client::ConnectOptions connect_options;
+  if (args.deadline_seconds > 0) connect_options.timeout_seconds = args.deadline_seconds;
+  auto connection = client::SceneClient::connect(args.server, connect_options);
+  if (!connection.ok()) return report_command_error("query", connection.status().message());
+  client::SceneClient& scene = **connection;
+
+  client::CallOptions options;
+  options.deadline_seconds = args.deadline_seconds;
+  options.strict = args.strict;
+  options.no_reorder = args.no_reorder;
+  options.chunk_rays = args.chunk_rays;
+  client::CallStats stats;
+  Status status;
+  Status written;
+  if (args.any_hit) {
+    std::vector<uint8_t> occluded(rays->size());
+    status = scene.occluded(*rays, occluded, options, &stats);
+    if (status.ok()) written = write_bools_npy(args.output_path, occluded);
+  } else {
+    std::vector<Hit> hits(rays->size());
+    status = scene.intersect(*rays, hits, options, &stats);
+    if (status.ok()) written = write_hits_npy(args.output_path, hits);
+  }
+  if (!status.ok()) return report_command_error("query", status.message());
+  if (!written.ok()) return report_command_error("query", written.message());
+  if (args.print_stats) {
+    const v1::QueryStats& s = stats.engine;
+    std::printf(
+        "messages %llu\nrays %llu\nrays_hit %llu\ninvalid_rays %llu\nbrick_visits %llu\ncache_hits %llu\n"
+        "cache_misses %llu\nbrick_builds %llu\nevictions %llu\nseconds_engine %.6f\n",
+        static_cast<unsigned long long>(stats.messages), static_cast<unsigned long long>(s.rays()),
+        static_cast<unsigned long long>(s.rays_hit()), static_cast<unsigned long long>(s.invalid_rays()),
+        static_cast<unsigned long long>(s.brick_visits()), static_cast<unsigned long long>(s.cache_hits()),
+        static_cast<unsigned long long>(s.cache_misses()), static_cast<unsigned long long>(s.brick_builds()),
+        static_cast<unsigned long long>(s.evictions()), s.seconds_total());
+  }
+  return 0;
+}
+
+}  // namespace
+
+void add_query_command(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<QueryArgs>();
+  CLI::App* cmd = app.add_subcommand("query", "Trace a rays .npy on an `outcore serve` server");
+  cmd->add_option("--server", args->server, "HOST:PORT of the server")->capture_default_str();
+  cmd->add_option("--rays", args->rays_path, "Rays .npy: float32 (N,6) or (N,8)")->required();
+  cmd->add_option("-o,--output", args->output_path, "Hits .npy to write (bool .npy with --any-hit)")
+      ->required();
+  cmd->add_flag("--any-hit", args->any_hit, "Occlusion query: write whether each ray hits anything");
+  cmd->add_option("--deadline-s", args->deadline_seconds, "Deadline of the whole batch, seconds (0: none)");
+  cmd->add_flag("--strict", args->strict, "Invalid rays are an error naming the first one (default: misses)");
+  cmd->add_flag("--no-reorder", args->no_reorder, "Server traces rays one by one in input order");
+  cmd->add_option(
+      "--chunk-rays", args->chunk_rays,
+      "Rays per message (default: as many as the server's max message size allows); larger batches "
+      "are streamed");
+  cmd->add_flag("--stats", args->print_stats, "Print the engine's figures summed over the replies");
+  cmd->callback([args, &exit_code] { exit_code = run_query(*args); });
+}
+
+}  // namespace outcore

@@ -1,0 +1,260 @@
+#include "client/cpp/scene_client.h"
+
+#include <grpcpp/grpcpp.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cstring>
+#include <thread>
+
+namespace outcore::client {
+
+static_assert(std::endian::native == std::endian::little, "the wire layouts are little-endian");
+
+namespace {
+
+// Room in a message for everything but its rays or hits.
+constexpr uint64_t kMessageOverheadBytes = 1024;
+// Both ways carry at most 32 bytes per ray (F32X8 rays, hit records).
+constexpr uint64_t kWireBytesPerRay = 32;
+// Assumed when a server does not report its limit (gRPC's usual default).
+constexpr uint64_t kDefaultMaxMessageBytes = uint64_t{4} << 20;
+
+const char* grpc_code_name(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK: return "OK";
+    case grpc::StatusCode::CANCELLED: return "CANCELLED";
+    case grpc::StatusCode::UNKNOWN: return "UNKNOWN";
+    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
+    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
+    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
+    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
+    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
+    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
+    case grpc::StatusCode::ABORTED: return "ABORTED";
+    case grpc::StatusCode::OUT_OF_RANGE: return "OUT_OF_RANGE";
+    case grpc::StatusCode::UNIMPLEMENTED: return "UNIMPLEMENTED";
+    case grpc::StatusCode::INTERNAL: return "INTERNAL";
+    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
+    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
+    default: return "UNKNOWN";
+  }
+}
+
+void set_deadline(grpc::ClientContext& context, double seconds) {
+  if (seconds > 0) {
+    context.set_deadline(std::chrono::system_clock::now() +
+                         std::chrono::duration_cast<std::chrono::system_clock::duration>(
+                             std::chrono::duration<double>(seconds)));
+  }
+}
+
+// Per reply type: the stub's methods and the reply's payload.
+grpc::Status call_unary(v1::SceneQuery::Stub& stub, grpc::ClientContext* context,
+                        const v1::QueryRequest& request, v1::IntersectResponse* response) {
+  return stub.Intersect(context, request, response);
+}
+grpc::Status call_unary(v1::SceneQuery::Stub& stub, grpc::ClientContext* context,
+                        const v1::QueryRequest& request, v1::OccludedResponse* response) {
+  return stub.Occluded(context, request, response);
+}
+auto open_stream(v1::SceneQuery::Stub& stub, grpc::ClientContext* context, const v1::IntersectResponse*) {
+  return stub.IntersectStream(context);
+}
+auto open_stream(v1::SceneQuery::Stub& stub, grpc::ClientContext* context, const v1::OccludedResponse*) {
+  return stub.OccludedStream(context);
+}
+const std::string& payload(const v1::IntersectResponse& response) {
+  return response.hits();
+}
+const std::string& payload(const v1::OccludedResponse& response) {
+  return response.occluded();
+}
+const char* method_name(const v1::IntersectResponse*) {
+  return "Intersect";
+}
+const char* method_name(const v1::OccludedResponse*) {
+  return "Occluded";
+}
+
+void fill_request(std::span<const Ray> rays, uint64_t sequence, const CallOptions& options,
+                  v1::QueryRequest& request) {
+  v1::RayBatch* batch = request.mutable_batch();
+  batch->set_layout_version(1);
+  batch->set_ray_layout(v1::RAY_LAYOUT_F32X8);
+  batch->set_ray_count(rays.size());
+  batch->set_rays(reinterpret_cast<const char*>(rays.data()), rays.size_bytes());
+  request.set_strict(options.strict);
+  request.set_no_reorder(options.no_reorder);
+  request.set_sequence(sequence);
+}
+
+void add_stats(const v1::QueryStats& from, CallStats* to) {
+  if (to == nullptr) return;
+  ++to->messages;
+  v1::QueryStats& s = to->engine;
+  s.set_rays(s.rays() + from.rays());
+  s.set_invalid_rays(s.invalid_rays() + from.invalid_rays());
+  s.set_rays_hit(s.rays_hit() + from.rays_hit());
+  s.set_brick_visits(s.brick_visits() + from.brick_visits());
+  s.set_brick_acquisitions(s.brick_acquisitions() + from.brick_acquisitions());
+  s.set_cache_hits(s.cache_hits() + from.cache_hits());
+  s.set_cache_misses(s.cache_misses() + from.cache_misses());
+  s.set_brick_builds(s.brick_builds() + from.brick_builds());
+  s.set_evictions(s.evictions() + from.evictions());
+  s.set_seconds_total(s.seconds_total() + from.seconds_total());
+  s.set_seconds_build(s.seconds_build() + from.seconds_build());
+}
+
+// A reply must answer exactly the rays its request sent.
+template <class Response>
+Status check_reply(const Response& response, uint64_t rays, uint32_t bytes_per_ray, uint64_t sequence) {
+  if (response.layout_version() != 1 || response.ray_count() != rays ||
+      payload(response).size() != rays * bytes_per_ray || response.sequence() != sequence) {
+    return internal_error("the server's reply to message " + std::to_string(sequence) +
+                          " is malformed: layout " + std::to_string(response.layout_version()) + ", " +
+                          std::to_string(response.ray_count()) + " rays in " +
+                          std::to_string(payload(response).size()) + " bytes, sequence " +
+                          std::to_string(response.sequence()) + " (expected " + std::to_string(rays) +
+                          " rays, sequence " + std::to_string(sequence) + ")");
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Status from_grpc_status(const grpc::Status& status, const std::string& context) {
+  if (status.ok()) return Status::Ok();
+  StatusCode code = StatusCode::kInternal;
+  switch (status.error_code()) {
+    case grpc::StatusCode::INVALID_ARGUMENT: code = StatusCode::kInvalidArgument; break;
+    case grpc::StatusCode::NOT_FOUND: code = StatusCode::kNotFound; break;
+    case grpc::StatusCode::ALREADY_EXISTS: code = StatusCode::kAlreadyExists; break;
+    case grpc::StatusCode::DATA_LOSS: code = StatusCode::kDataLoss; break;
+    case grpc::StatusCode::FAILED_PRECONDITION: code = StatusCode::kFailedPrecondition; break;
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: code = StatusCode::kResourceExhausted; break;
+    case grpc::StatusCode::OUT_OF_RANGE: code = StatusCode::kOutOfRange; break;
+    case grpc::StatusCode::CANCELLED:
+    case grpc::StatusCode::DEADLINE_EXCEEDED: code = StatusCode::kCancelled; break;
+    case grpc::StatusCode::UNAVAILABLE: code = StatusCode::kIoError; break;
+    default: code = StatusCode::kInternal; break;
+  }
+  return Status(code, context + ": " + grpc_code_name(status.error_code()) + ": " + status.error_message());
+}
+
+SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string address)
+    : channel_(std::move(channel)), stub_(v1::SceneQuery::NewStub(channel_)), address_(std::move(address)) {}
+
+Expected<std::unique_ptr<SceneClient>> SceneClient::connect(const std::string& address,
+                                                            const ConnectOptions& options) {
+  grpc::ChannelArguments arguments;
+  // The server's limit is the one that matters; ours must not be lower.
+  arguments.SetMaxReceiveMessageSize(-1);
+  arguments.SetMaxSendMessageSize(-1);
+  std::shared_ptr<grpc::Channel> channel =
+      grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), arguments);
+  std::unique_ptr<SceneClient> client(new SceneClient(std::move(channel), address));
+  OUTCORE_ASSIGN_OR_RETURN(client->scene_, client->scene_info(options.timeout_seconds));
+  const uint64_t max_message =
+      client->scene_.max_message_bytes() ? client->scene_.max_message_bytes() : kDefaultMaxMessageBytes;
+  client->max_chunk_rays_ =
+      std::max<uint64_t>(1, (max_message - std::min(max_message, kMessageOverheadBytes)) / kWireBytesPerRay);
+  return client;
+}
+
+Expected<v1::SceneInfo> SceneClient::scene_info(double deadline_seconds) {
+  grpc::ClientContext context;
+  set_deadline(context, deadline_seconds);
+  v1::SceneInfo info;
+  const grpc::Status status = stub_->GetSceneInfo(&context, v1::GetSceneInfoRequest(), &info);
+  if (!status.ok()) return from_grpc_status(status, "GetSceneInfo from " + address_);
+  return info;
+}
+
+Expected<v1::ServerStats> SceneClient::stats(double deadline_seconds) {
+  grpc::ClientContext context;
+  set_deadline(context, deadline_seconds);
+  v1::ServerStats stats;
+  const grpc::Status status = stub_->GetStats(&context, v1::GetStatsRequest(), &stats);
+  if (!status.ok()) return from_grpc_status(status, "GetStats from " + address_);
+  return stats;
+}
+
+Status SceneClient::intersect(std::span<const Ray> rays, std::span<Hit> hits, const CallOptions& options,
+                              CallStats* stats) {
+  if (hits.size() != rays.size()) return invalid_argument("hits and rays differ in length");
+  return run<v1::IntersectResponse>(
+      rays, std::span<uint8_t>(reinterpret_cast<uint8_t*>(hits.data()), hits.size_bytes()), sizeof(Hit),
+      options, stats);
+}
+
+Status SceneClient::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded,
+                             const CallOptions& options, CallStats* stats) {
+  if (occluded.size() != rays.size()) return invalid_argument("occlusion flags and rays differ in length");
+  return run<v1::OccludedResponse>(rays, occluded, 1, options, stats);
+}
+
+template <class Response>
+Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint32_t out_bytes_per_ray,
+                        const CallOptions& options, CallStats* stats) {
+  const uint64_t n = rays.size();
+  if (n == 0) return Status::Ok();
+  const uint64_t chunk = options.chunk_rays ? std::min(options.chunk_rays, max_chunk_rays_) : max_chunk_rays_;
+  const std::string method = method_name(static_cast<const Response*>(nullptr));
+  grpc::ClientContext context;
+  set_deadline(context, options.deadline_seconds);
+
+  if (n <= chunk) {
+    v1::QueryRequest request;
+    fill_request(rays, 0, options, request);
+    Response response;
+    const grpc::Status status = call_unary(*stub_, &context, request, &response);
+    if (!status.ok()) return from_grpc_status(status, method + " on " + address_);
+    OUTCORE_RETURN_IF_ERROR(check_reply(response, n, out_bytes_per_ray, 0));
+    std::memcpy(out.data(), payload(response).data(), n * out_bytes_per_ray);
+    add_stats(response.stats(), stats);
+    return Status::Ok();
+  }
+
+  const uint64_t chunks = (n + chunk - 1) / chunk;
+  auto stream = open_stream(*stub_, &context, static_cast<const Response*>(nullptr));
+  // Writing on a second thread keeps the next chunks flowing (up to gRPC's
+  // flow-control window) while this thread waits for and copies out replies.
+  std::thread writer([&] {
+    v1::QueryRequest request;
+    for (uint64_t c = 0; c < chunks; ++c) {
+      const uint64_t first = c * chunk;
+      fill_request(rays.subspan(first, std::min(chunk, n - first)), c, options, request);
+      if (!stream->Write(request)) return;  // the call ended; Finish() says why
+    }
+    stream->WritesDone();
+  });
+  Status reply_status;
+  Response response;
+  uint64_t received = 0;
+  for (; received < chunks; ++received) {
+    if (!stream->Read(&response)) break;
+    const uint64_t first = received * chunk;
+    const uint64_t count = std::min(chunk, n - first);
+    reply_status = check_reply(response, count, out_bytes_per_ray, received);
+    if (!reply_status.ok()) break;
+    std::memcpy(out.data() + first * out_bytes_per_ray, payload(response).data(), count * out_bytes_per_ray);
+    add_stats(response.stats(), stats);
+  }
+  // A malformed reply: stop the call so the writer wakes up.
+  if (!reply_status.ok()) context.TryCancel();
+  writer.join();
+  const grpc::Status status = stream->Finish();
+  if (!reply_status.ok()) return reply_status;
+  if (!status.ok()) return from_grpc_status(status, method + "Stream on " + address_);
+  if (received != chunks) {
+    return internal_error(method + "Stream on " + address_ + ": the server ended the stream after " +
+                          std::to_string(received) + " of " + std::to_string(chunks) + " replies");
+  }
+  return Status::Ok();
+}
+
+}  // namespace outcore::client

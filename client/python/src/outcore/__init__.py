@@ -1,0 +1,17 @@
+"""Outcore's Python client: ray queries against `outcore serve` over gRPC,
+with Open3D RaycastingScene-style results.
+
+    import numpy as np, outcore
+    with outcore.SceneClient("127.0.0.1:50051") as scene:
+        ans = scene.cast_rays(rays)          # rays: (..., 6) or (..., 8) float32
+        ans["t_hit"], ans["primitive_ids"]   # Open3D's keys; misses: inf, INVALID_ID
+        hit = scene.test_occlusions(rays)    # (...,) bool
+
+See docs/PYTHON.md in the repository.
+"""
+
+from .client import INVALID_ID, SceneClient
+from .errors import OutcoreError
+
+__all__ = ["SceneClient", "OutcoreError", "INVALID_ID"]
+__version__ = "0.1.0"

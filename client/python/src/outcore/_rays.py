@@ -1,0 +1,37 @@
+"""Ray batches as the wire wants them: (N, 6) or (N, 8) little-endian float32.
+
+Thread-safety: pure functions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+RAY_COLUMNS = (6, 8)
+_WIRE_DTYPE = np.dtype("<f4")
+
+
+def as_wire_rays(rays) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Returns (flat, batch_shape): `flat` is C-contiguous (N, 6|8) '<f4', a
+    view of `rays` when it already is one; `batch_shape` is rays.shape[:-1],
+    the shape the per-ray results are given back in (Open3D's convention).
+
+    Raises ValueError naming the problem for anything that is not a real
+    numeric array of shape (..., 6) or (..., 8).
+    """
+    try:
+        arr = np.asarray(rays)
+    except (TypeError, ValueError) as e:  # ragged lists and the like
+        raise ValueError(f"rays must be an array of numbers of shape (..., 6) or (..., 8): {e}") from None
+    # Integers convert exactly enough; bool, complex, strings and objects do not.
+    if arr.dtype.kind not in "fiu":
+        raise ValueError(
+            f"rays must have a real numeric dtype (float32 preferred), got dtype {arr.dtype}"
+        )
+    if arr.ndim < 2 or arr.shape[-1] not in RAY_COLUMNS:
+        raise ValueError(
+            "rays must have shape (N, 6) [ox oy oz dx dy dz] or (N, 8) [... tnear tfar] "
+            f"(leading batch dims allowed), got shape {arr.shape}"
+        )
+    flat = np.ascontiguousarray(arr, dtype=_WIRE_DTYPE).reshape(-1, arr.shape[-1])
+    return flat, tuple(arr.shape[:-1])

@@ -1,0 +1,104 @@
+// BvhBrickAccel: a brick's triangles in our own binned-SAH BVH (bvh_tree.h),
+// traced with the triangle test chosen by name (TriangleTest), and
+// BvhBrickBuilder, the BrickBuilder that makes them (registered as "bvh" in
+// brick_accel_factory.cpp).
+//
+// Hits follow the same contract as the embree brick: a hit at t counts when
+// tnear < t <= tfar; ids are the user's; u, v are Embree's barycentrics
+// (p = (1-u-v) v0 + u v1 + v v2); the normal is normalize(cross(v1 - v0,
+// v2 - v0)) computed in float64 and rounded (Embree's Ng orientation);
+// ties at equal t go to the smaller (geometry_id, primitive_id)
+// (hit_is_better). Triangles that are degenerate in float64 (or not finite)
+// are left out: the float64 reference never hits them.
+//
+// The test is selected once per brick call (one switch), then a loop over the
+// rays calls the traversal templated on it: no per-ray dispatch.
+//
+// Memory: memory_bytes() = the tree's arrays (32 B per node, 56 B per
+// triangle) + kOverheadBytes. reserve_bytes(n) bounds it and the build peak
+// (see bvh_brick.cpp).
+//
+// Thread-safety: build() may run on many threads at once; a built accel is
+// immutable and intersect() / occluded() may run concurrently.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "core/accel/brick_accel_factory.h"
+#include "core/accel/bvh/binned_sah_builder.h"
+#include "core/accel/bvh/bvh_tree.h"
+#include "core/store/brick_data.h"
+
+namespace outcore {
+
+enum class TriangleTest { kMt, kWatertight, kDouble };
+
+std::string_view triangle_test_name(TriangleTest test);
+std::optional<TriangleTest> triangle_test_from_name(std::string_view name);
+
+struct BvhBrickConfig {
+  // Default watertight: zero leaks through shared edges and vertices (the
+  // stress suite), at a small cost over mt; double is the accuracy reference.
+  TriangleTest triangle_test = TriangleTest::kWatertight;
+  BinnedSahBuilder::Config builder;
+};
+
+class BvhBrickAccel final : public BrickAccel {
+ public:
+  static constexpr uint64_t kMaxTriangles = 0xfffffffeu;
+  // This object and what the allocator keeps per allocation, with margin.
+  static constexpr uint64_t kOverheadBytes = 512;
+
+  // Consumes the brick. INVALID_ARGUMENT when ids and triangles differ in
+  // count or the config is invalid, OUT_OF_RANGE beyond kMaxTriangles.
+  static Expected<std::unique_ptr<BvhBrickAccel>> build(BrickData&& brick, const BvhBrickConfig& config);
+  // A brick from a tree (e.g. deserialize_bvh()); the tree must be valid.
+  static std::unique_ptr<BvhBrickAccel> from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id);
+  // Upper bound on memory_bytes() and build_peak_bytes() for n triangles.
+  static uint64_t reserve_bytes(uint64_t triangle_count);
+
+  void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
+  void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
+
+  uint64_t memory_bytes() const override { return tree_.memory_bytes() + kOverheadBytes; }
+  double build_seconds() const override { return build_seconds_; }
+  uint32_t triangle_count() const override { return triangle_count_; }
+
+  // Beyond BrickAccel (statistics and tests):
+  const BvhTree& tree() const { return tree_; }
+  TriangleTest triangle_test() const { return test_; }
+  uint32_t brick_id() const { return brick_id_; }
+  uint64_t build_peak_bytes() const { return build_peak_bytes_; }
+
+ private:
+  BvhBrickAccel() = default;
+
+  BvhTree tree_;
+  TriangleTest test_ = TriangleTest::kWatertight;
+  uint32_t brick_id_ = 0;
+  uint32_t triangle_count_ = 0;  // including the degenerate ones left out
+  uint64_t build_peak_bytes_ = 0;
+  double build_seconds_ = 0;
+};
+
+class BvhBrickBuilder final : public BrickBuilder {
+ public:
+  explicit BvhBrickBuilder(const BvhBrickConfig& config) : config_(config) {}
+
+  Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override;
+  uint64_t reserve_bytes(uint32_t triangle_count) const override {
+    return BvhBrickAccel::reserve_bytes(triangle_count);
+  }
+  const std::string& name() const override;
+  const BvhBrickConfig& config() const { return config_; }
+
+ private:
+  BvhBrickConfig config_;
+};
+
+}  // namespace outcore

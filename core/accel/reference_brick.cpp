@@ -1,0 +1,102 @@
+#include "core/accel/reference_brick.h"
+
+#include <chrono>
+#include <utility>
+
+#include "core/accel/bvh/double_triangle_test.h"
+#include "core/query/query_types.h"
+
+namespace outcore {
+
+Expected<std::unique_ptr<ReferenceBrickAccel>> ReferenceBrickAccel::build(BrickData&& brick) {
+  const auto start = std::chrono::steady_clock::now();
+  const uint64_t n = brick.triangles.size();
+  if (brick.ids.size() != n) {
+    return invalid_argument("building brick " + std::to_string(brick.brick_id) +
+                            " (reference): " + std::to_string(n) + " triangles but " +
+                            std::to_string(brick.ids.size()) + " ids");
+  }
+  if (n > 0xfffffffeu) {
+    return out_of_range("building brick " + std::to_string(brick.brick_id) +
+                        " (reference): too many triangles");
+  }
+  std::unique_ptr<ReferenceBrickAccel> accel(new ReferenceBrickAccel());
+  accel->triangle_count_ = static_cast<uint32_t>(n);
+  // Compacted in place: the brick's own vectors are kept.
+  uint64_t kept = 0;
+  for (uint64_t k = 0; k < n; ++k) {
+    const Triangle& tri = brick.triangles[k];
+    if (!tri.is_finite() || tri.is_degenerate()) continue;
+    brick.triangles[kept] = tri;
+    brick.ids[kept] = brick.ids[k];
+    ++kept;
+  }
+  brick.triangles.resize(kept);
+  brick.ids.resize(kept);
+  accel->normals_.reserve(kept);
+  for (const Triangle& tri : brick.triangles) {
+    const Vec3d v0(tri.v0), v1(tri.v1), v2(tri.v2);
+    accel->normals_.push_back(Vec3f(normalize(cross(v1 - v0, v2 - v0))));
+  }
+  accel->triangles_ = std::move(brick.triangles);
+  accel->ids_ = std::move(brick.ids);
+  accel->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return accel;
+}
+
+uint64_t ReferenceBrickAccel::memory_bytes() const {
+  return kOverheadBytes + triangles_.capacity() * sizeof(Triangle) + ids_.capacity() * sizeof(TriangleId) +
+         normals_.capacity() * sizeof(Vec3f);
+}
+
+void ReferenceBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
+  for (const uint32_t i : ray_ids) {
+    const Ray& ray = rays[i];
+    Hit& best = hits[i];
+    const auto prepared = DoubleTriangleTest::prepare(ray);
+    uint32_t found = kInvalidId;
+    TriangleHit found_hit{};
+    for (uint32_t k = 0; k < triangles_.size(); ++k) {
+      const float tfar = ray.tfar < best.t ? ray.tfar : best.t;
+      TriangleHit h;
+      if (!DoubleTriangleTest::hit(prepared, triangles_[k], ray.tnear, tfar, h)) continue;
+      if (!hit_is_better(h.t, ids_[k].geometry_id, ids_[k].primitive_id, best)) continue;
+      best.t = h.t;
+      best.geometry_id = ids_[k].geometry_id;
+      best.primitive_id = ids_[k].primitive_id;
+      found = k;
+      found_hit = h;
+    }
+    if (found == kInvalidId) continue;
+    best.u = found_hit.u;
+    best.v = found_hit.v;
+    best.normal = normals_[found];
+  }
+}
+
+void ReferenceBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays,
+                                   uint8_t* occluded) const {
+  for (const uint32_t i : ray_ids) {
+    if (occluded[i] != 0) continue;
+    const auto prepared = DoubleTriangleTest::prepare(rays[i]);
+    for (const Triangle& tri : triangles_) {
+      TriangleHit h;
+      if (DoubleTriangleTest::hit(prepared, tri, rays[i].tnear, rays[i].tfar, h)) {
+        occluded[i] = 1;
+        break;
+      }
+    }
+  }
+}
+
+Expected<std::unique_ptr<BrickAccel>> ReferenceBrickBuilder::build(BrickData&& brick) const {
+  OUTCORE_ASSIGN_OR_RETURN(auto accel, ReferenceBrickAccel::build(std::move(brick)));
+  return std::unique_ptr<BrickAccel>(std::move(accel));
+}
+
+const std::string& ReferenceBrickBuilder::name() const {
+  static const std::string kName = "reference";
+  return kName;
+}
+
+}  // namespace outcore

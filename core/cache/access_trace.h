@@ -1,0 +1,113 @@
+// Brick access traces: one record per successful brick acquisition of a
+// BrickCache, in the order the cache served them, for offline replay
+// (cache_simulator.h, `outcore cache-sim`).
+//
+// File format (CSV, version 1), chosen to be read by people and by pandas:
+//
+//   # outcore brick access trace, version 1
+//   # policy: lru
+//   # budget_bytes: 67108864
+//   # builder: embree
+//   # bricks: 640
+//   # source: trace scene.oc rays.npy
+//   seq,brick,bytes,reserved_bytes,build_seconds,outcome
+//   0,17,1433600,2097152,0.00231,miss
+//   1,17,1433600,2097152,0,hit
+//
+// The first line names the version; other "# key: value" lines are metadata
+// (all optional); the column line is required. seq counts records from 0 in
+// file order. bytes: the brick's accounted bytes (after the build on a miss,
+// the resident size on a hit). reserved_bytes: the builder's upper bound the
+// cache reserves before building it (BrickBuilder::reserve_bytes).
+// build_seconds: measured load + build time on a miss, 0 otherwise, written
+// with 17 significant digits so a replay feeds GDSF the very same cost.
+// outcome: miss (this request built the brick), hit (it was ready), wait (it
+// was being built by another thread and this request waited for that build).
+// Failed acquisitions are not recorded.
+//
+// Thread-safety: AccessTraceWriter::append/close may be called from any thread
+// (one mutex, never taken under the cache's lock); the reader is a function.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "core/util/status.h"
+
+namespace outcore {
+
+enum class AccessOutcome : uint8_t { kHit, kMiss, kWait };
+const char* access_outcome_name(AccessOutcome outcome);
+
+struct AccessRecord {
+  uint64_t seq = 0;
+  uint32_t brick = 0;
+  uint64_t bytes = 0;
+  uint64_t reserved_bytes = 0;
+  double build_seconds = 0;
+  AccessOutcome outcome = AccessOutcome::kHit;
+};
+
+// The metadata lines; empty or zero when a trace does not give them.
+struct AccessTraceInfo {
+  std::string policy;
+  uint64_t budget_bytes = 0;
+  std::string builder;
+  uint32_t bricks = 0;
+  std::string source;
+};
+
+struct AccessTrace {
+  AccessTraceInfo info;
+  std::vector<AccessRecord> records;
+};
+
+inline constexpr int kAccessTraceVersion = 1;
+
+class AccessTraceWriter {
+ public:
+  // Creates (or truncates) `path`; `source` goes into the metadata.
+  static Expected<std::shared_ptr<AccessTraceWriter>> create(const std::string& path, std::string source);
+  ~AccessTraceWriter();
+  AccessTraceWriter(const AccessTraceWriter&) = delete;
+  AccessTraceWriter& operator=(const AccessTraceWriter&) = delete;
+
+  // Metadata from the cache that records into this writer; must come before
+  // the first append (BrickCache::set_access_trace calls it).
+  void set_info(const std::string& policy, uint64_t budget_bytes, const std::string& builder,
+                uint32_t bricks);
+  // A chunk of consecutive records (by seq). Chunks may arrive out of order
+  // from different threads; they are written in seq order.
+  void append(std::vector<AccessRecord> chunk);
+  // Writes what is pending and closes the file; the first write error, if
+  // any. Later appends are dropped.
+  Status close();
+  uint64_t records_written() const;
+  const std::string& path() const { return path_; }
+
+ private:
+  AccessTraceWriter(std::string path, std::FILE* file, std::string source);
+  void write_header_locked();
+  void write_locked(const std::vector<AccessRecord>& chunk);
+
+  const std::string path_;
+  mutable std::mutex mutex_;
+  std::FILE* file_ = nullptr;
+  AccessTraceInfo info_;
+  bool header_written_ = false;
+  uint64_t next_seq_ = 0;
+  uint64_t written_ = 0;
+  std::map<uint64_t, std::vector<AccessRecord>> pending_;  // by first seq
+  Status status_;
+};
+
+// Reads a trace; errors name the file and line (bad version, missing column
+// line, a malformed field, seq out of order).
+Expected<AccessTrace> read_access_trace(const std::string& path);
+
+}  // namespace outcore

@@ -1,0 +1,79 @@
+// `outcore stress`: the numerical stress suite as a report (one table, a row
+// per case and configuration; core/accel/stress). Exit code 0 unless a
+// configuration that must not leak (bvh-watertight, bvh-double) leaked or
+// answered differently across brick seams, or the suite could not run.
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <string>
+
+#include "core/accel/stress/stress_runner.h"
+#include "core/accel/stress/stress_scenes.h"
+#include "core/cli/commands.h"
+
+namespace outcore {
+namespace {
+
+struct StressArgs {
+  std::string config = "all";
+  bool quick = false;
+  std::string models_dir = "../shared/models";
+  uint32_t stride = 1;
+  uint32_t checked = 0;  // 0: 1000 with --quick, else 20000
+};
+
+int run_stress_command(const StressArgs& args) {
+  auto configs = select_stress_configs(args.config);
+  if (!configs.ok()) return report_command_error("stress", configs.status().message());
+  if (args.stride == 0) return report_command_error("stress", "--stride must be at least 1");
+  StressOptions options;
+  options.quick = args.quick;
+  options.models_dir = args.models_dir;
+  options.stride = args.stride;
+  const auto start = std::chrono::steady_clock::now();
+  auto scenes = make_stress_scenes(options);
+  if (!scenes.ok()) return report_command_error("stress", scenes.status().message());
+  const uint32_t max_checked = args.checked != 0 ? args.checked : (args.quick ? 1000 : 20000);
+  std::vector<StressRow> rows;
+  bool failed = false;
+  for (const StressScene& scene : scenes->scenes) {
+    const StressReference reference = compute_stress_reference(scene, max_checked);
+    for (const StressConfig& config : *configs) {
+      auto row = run_stress(scene, reference, config);
+      if (!row.ok())
+        return report_command_error("stress",
+                                    scene.name + ", " + config.name + ": " + row.status().message());
+      if (config.must_not_leak && (row->leaks != 0 || row->seam_diffs > 0)) failed = true;
+      rows.push_back(*row);
+    }
+  }
+  std::fputs(format_stress_table(rows).c_str(), stdout);
+  for (const std::string& note : scenes->notes) std::printf("note: %s\n", note.c_str());
+  std::printf("%zu cases x %zu configurations in %.1f s\n", scenes->scenes.size(), configs->size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+  if (failed)
+    return report_command_error("stress", "a watertight configuration leaked or differed across brick seams");
+  return 0;
+}
+
+}  // namespace
+
+void add_stress_command(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<StressArgs>();
+  CLI::App* cmd = app.add_subcommand("stress", "Numerical stress suite: leaks and errors per configuration");
+  cmd->add_option("--config", args->config,
+                  "all, embree, embree-robust, bvh-mt, bvh-watertight or bvh-double")
+      ->capture_default_str();
+  cmd->add_flag("--quick", args->quick, "Smaller generated meshes and fewer reference checks");
+  cmd->add_option("--models", args->models_dir, "Directory with fandisk.obj, homer.obj, spot.obj, beast.obj")
+      ->capture_default_str();
+  cmd->add_option("--stride", args->stride, "Aim at every N-th vertex and edge midpoint")
+      ->capture_default_str();
+  cmd->add_option("--checked", args->checked,
+                  "Rays per case checked against the float64 brute force (default 1000 quick, 20000 full)");
+  cmd->callback([args, &exit_code] { exit_code = run_stress_command(*args); });
+}
+
+}  // namespace outcore

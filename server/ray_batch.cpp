@@ -1,0 +1,112 @@
+#include "server/ray_batch.h"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include "core/query/query_engine.h"
+
+namespace outcore::server {
+
+static_assert(std::endian::native == std::endian::little, "the wire layouts are little-endian");
+static_assert(sizeof(Ray) == 32 && alignof(Ray) == alignof(float), "F32X8 is read in place as outcore::Ray");
+
+uint32_t ray_layout_bytes(int layout) {
+  switch (layout) {
+    case v1::RAY_LAYOUT_F32X8: return 32;
+    case v1::RAY_LAYOUT_F32X6: return 24;
+    default: return 0;
+  }
+}
+
+Expected<std::span<const Ray>> decode_ray_batch(const v1::RayBatch& batch, std::vector<Ray>& storage) {
+  if (batch.layout_version() != 1) {
+    return invalid_argument("batch.layout_version is " + std::to_string(batch.layout_version()) +
+                            "; this server reads layout version 1");
+  }
+  const uint32_t ray_bytes = ray_layout_bytes(batch.ray_layout());
+  if (ray_bytes == 0) {
+    return invalid_argument("batch.ray_layout is " +
+                            (batch.ray_layout() == v1::RAY_LAYOUT_UNSPECIFIED
+                                 ? std::string("RAY_LAYOUT_UNSPECIFIED")
+                                 : "the unknown value " + std::to_string(batch.ray_layout())) +
+                            "; use RAY_LAYOUT_F32X8 or RAY_LAYOUT_F32X6");
+  }
+  const std::string& bytes = batch.rays();
+  const char* layout_name = ray_bytes == 32 ? "RAY_LAYOUT_F32X8" : "RAY_LAYOUT_F32X6";
+  if (bytes.size() % ray_bytes != 0) {
+    return invalid_argument("batch.rays has " + std::to_string(bytes.size()) +
+                            " bytes, not a whole number of " + std::to_string(ray_bytes) + "-byte rays (" +
+                            layout_name + ")");
+  }
+  const uint64_t count = bytes.size() / ray_bytes;
+  if (batch.ray_count() != count) {
+    return invalid_argument("batch.ray_count is " + std::to_string(batch.ray_count()) +
+                            " but batch.rays holds " + std::to_string(count) + " rays (" +
+                            std::to_string(bytes.size()) + " bytes, " + layout_name + ")");
+  }
+  if (count == 0) return std::span<const Ray>();
+  if (ray_bytes == 32) {
+    // std::string storage comes from operator new or an arena (8-byte aligned)
+    // in practice; the check keeps a misaligned buffer correct, only slower.
+    if (reinterpret_cast<uintptr_t>(bytes.data()) % alignof(Ray) == 0) {
+      return std::span<const Ray>(reinterpret_cast<const Ray*>(bytes.data()), count);
+    }
+    storage.resize(count);
+    std::memcpy(static_cast<void*>(storage.data()), bytes.data(), bytes.size());
+    return std::span<const Ray>(storage);
+  }
+  storage.resize(count);
+  for (uint64_t i = 0; i < count; ++i) {
+    float row[6];
+    std::memcpy(row, bytes.data() + i * 24, sizeof row);
+    Ray& ray = storage[i];
+    ray.origin = Vec3f(row[0], row[1], row[2]);
+    ray.direction = Vec3f(row[3], row[4], row[5]);
+    ray.tnear = 0.0f;
+    ray.tfar = std::numeric_limits<float>::infinity();
+  }
+  return std::span<const Ray>(storage);
+}
+
+std::string ray_name(const BatchPosition& position, uint64_t index_in_batch) {
+  if (!position.streamed) return "ray " + std::to_string(index_in_batch);
+  return "ray " + std::to_string(position.first_ray + index_in_batch) + " (chunk " +
+         std::to_string(position.chunk) + ", ray " + std::to_string(index_in_batch) + " of the chunk)";
+}
+
+namespace {
+
+// Embree's FLT_LARGE: rtcIntersect asserts |origin|, |direction| <= this.
+constexpr float kLargestComponent = 1.844e18f;
+
+bool beyond_range(float x) {
+  return std::isfinite(x) && std::fabs(x) > kLargestComponent;
+}
+
+bool out_of_range(const Ray& ray) {
+  return beyond_range(ray.origin.x) || beyond_range(ray.origin.y) || beyond_range(ray.origin.z) ||
+         beyond_range(ray.direction.x) || beyond_range(ray.direction.y) || beyond_range(ray.direction.z);
+}
+
+}  // namespace
+
+Status check_rays(std::span<const Ray> rays, const BatchPosition& position, bool strict) {
+  for (size_t i = 0; i < rays.size(); ++i) {
+    if (strict) {
+      if (const char* problem = ray_problem(rays[i])) {
+        return invalid_argument(ray_name(position, i) + ": " + problem);
+      }
+    }
+    if (out_of_range(rays[i])) {
+      return invalid_argument(
+          ray_name(position, i) +
+          ": an origin or direction component is beyond +-1.844e18, outside the range the "
+          "brick intersector accepts");
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace outcore::server

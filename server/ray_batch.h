@@ -1,0 +1,53 @@
+// Decoding and checking a wire RayBatch (layout version 1, see
+// proto/outcore/v1/scene_query.proto) into the engine's rays, and naming rays
+// in error messages by their place in the call.
+//
+// F32X8 is byte-identical to outcore::Ray, so its rays are used in place inside
+// the request's bytes (no copy) whenever those bytes are float-aligned; F32X6
+// rows are widened into caller-provided storage.
+//
+// Thread-safety: free functions, reentrant.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/query/ray_types.h"
+#include "core/util/status.h"
+#include "outcore/v1/scene_query.pb.h"
+
+namespace outcore::server {
+
+// Where a batch sits in its call: a unary call is one batch; a stream's chunk
+// `chunk` (0-based, in arrival order) starts at global ray `first_ray`.
+struct BatchPosition {
+  bool streamed = false;
+  uint64_t chunk = 0;
+  uint64_t first_ray = 0;
+};
+
+// Bytes per ray of a layout, 0 for RAY_LAYOUT_UNSPECIFIED and unknown values.
+uint32_t ray_layout_bytes(int layout);
+
+// Checks layout_version, ray_layout, that rays is a whole number of rays and
+// that ray_count agrees; INVALID_ARGUMENT naming the field otherwise. The rays
+// returned live in batch.rays() or in `storage`.
+Expected<std::span<const Ray>> decode_ray_batch(const v1::RayBatch& batch, std::vector<Ray>& storage);
+
+// "ray 7" in a unary call; "ray 1007 (chunk 2, ray 7 of the chunk)" in a stream:
+// the first number is always the ray's index in everything the call sent.
+std::string ray_name(const BatchPosition& position, uint64_t index_in_batch);
+
+// INVALID_ARGUMENT naming the first ray (ray_name) that is invalid
+// (ray_problem; only when `strict`) or out of range, or OK.
+//
+// Out of range: a finite origin or direction component beyond +-1.844e18
+// (Embree's FLT_LARGE). The engine's ray_problem() lets such rays through and
+// Embree then aborts the process on its ray.valid() assertion (Debian builds
+// Embree with asserts), so the server refuses them in every mode until the
+// engine counts them as invalid rays itself.
+Status check_rays(std::span<const Ray> rays, const BatchPosition& position, bool strict);
+
+}  // namespace outcore::server

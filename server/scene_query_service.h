@@ -1,0 +1,86 @@
+// SceneQueryService: the gRPC service outcore.v1.SceneQuery, a thin layer over
+// one QueryEngine. It checks each request (ray_batch.h), answers it with the
+// engine, and turns the engine's Status into a grpc::Status in one place
+// (grpc_status.h). F32X8 rays are traced in place in the request's bytes and
+// hits are written straight into the reply's bytes.
+//
+// Deadlines and cancellation are checked before each batch is traced (unary)
+// and between chunks (streams); a batch already being traced runs to its end.
+// Each stream chunk is answered by one reply, in order, echoing its sequence;
+// the first bad chunk ends the stream with its error.
+//
+// Thread-safety: all handlers may run concurrently (gRPC's sync server calls
+// them from its thread pool); counters are atomics, the engine is thread-safe.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include "core/query/query_engine.h"
+#include "core/query/query_types.h"
+#include "outcore/v1/scene_query.grpc.pb.h"
+#include "server/ray_batch.h"
+
+namespace outcore::server {
+
+struct ServiceOptions {
+  // Largest message either way, in bytes (the server's --max-message-mb);
+  // a reply that would exceed it is refused up front as RESOURCE_EXHAUSTED.
+  uint64_t max_message_bytes = uint64_t{64} << 20;
+};
+
+// Server-wide figures since start (a snapshot of the atomics).
+struct ServiceCounters {
+  uint64_t requests = 0;  // unary calls + stream chunks answered or refused
+  uint64_t failed_requests = 0;
+  uint64_t rays = 0;
+  uint64_t rays_hit = 0;
+  uint64_t invalid_rays = 0;
+  double seconds_tracing = 0;
+};
+
+class SceneQueryService final : public v1::SceneQuery::Service {
+ public:
+  SceneQueryService(QueryEngine& engine, const ServiceOptions& options);
+
+  grpc::Status Intersect(grpc::ServerContext* context, const v1::QueryRequest* request,
+                         v1::IntersectResponse* response) override;
+  grpc::Status Occluded(grpc::ServerContext* context, const v1::QueryRequest* request,
+                        v1::OccludedResponse* response) override;
+  grpc::Status IntersectStream(
+      grpc::ServerContext* context,
+      grpc::ServerReaderWriter<v1::IntersectResponse, v1::QueryRequest>* stream) override;
+  grpc::Status OccludedStream(
+      grpc::ServerContext* context,
+      grpc::ServerReaderWriter<v1::OccludedResponse, v1::QueryRequest>* stream) override;
+  grpc::Status GetSceneInfo(grpc::ServerContext* context, const v1::GetSceneInfoRequest* request,
+                            v1::SceneInfo* response) override;
+  grpc::Status GetStats(grpc::ServerContext* context, const v1::GetStatsRequest* request,
+                        v1::ServerStats* response) override;
+
+  ServiceCounters counters() const;
+
+ private:
+  template <QueryKind kKind, class Response>
+  grpc::Status answer(grpc::ServerContext* context, const v1::QueryRequest& request,
+                      const BatchPosition& position, Response* response);
+  template <QueryKind kKind, class Response>
+  grpc::Status serve_stream(grpc::ServerContext* context,
+                            grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream);
+  // Counts one answered request and logs it at debug level.
+  grpc::Status finish(const char* method, const grpc::Status& status, uint64_t rays,
+                      std::chrono::steady_clock::time_point start);
+
+  QueryEngine& engine_;
+  const ServiceOptions options_;
+  std::atomic<uint64_t> requests_{0};
+  std::atomic<uint64_t> failed_requests_{0};
+  std::atomic<uint64_t> rays_{0};
+  std::atomic<uint64_t> rays_hit_{0};
+  std::atomic<uint64_t> invalid_rays_{0};
+  std::atomic<uint64_t> nanoseconds_tracing_{0};
+};
+
+}  // namespace outcore::server

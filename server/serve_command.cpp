@@ -1,0 +1,173 @@
+#include "server/serve_command.h"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/grpcpp.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/resource_quota.h>
+#include <signal.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+#include <tbb/global_control.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <cstdio>
+#include <limits>
+#include <memory>
+#include <string>
+
+#include "core/cli/commands.h"
+#include "core/query/query_engine.h"
+#include "server/scene_query_service.h"
+
+namespace outcore {
+
+namespace {
+
+// In-flight calls get this long to finish after SIGINT/SIGTERM.
+constexpr std::chrono::seconds kDrainDeadline{10};
+// While serving, a summary is logged at most this often (when anything changed).
+constexpr std::chrono::seconds kSummaryInterval{60};
+
+struct ServeArgs {
+  std::string scene;
+  std::string listen = "127.0.0.1:50051";
+  uint64_t cache_mb = 1024;
+  std::string policy = "lru";
+  std::string brick_accel = "embree";
+  int threads = 0;
+  int rpc_threads = 64;
+  uint32_t max_message_mb = 64;
+  std::string log_level = "info";
+};
+
+void log_summary(const server::SceneQueryService& service, const QueryEngine& engine) {
+  const server::ServiceCounters c = service.counters();
+  const CacheCounters cache = engine.cache().counters();
+  spdlog::info(
+      "{} requests ({} failed), {} rays ({} hit, {} invalid), {:.3f} s tracing; cache: {} hits, {} misses, "
+      "{} builds, {} evictions, {} bricks / {} bytes resident (peak {}, budget {})",
+      c.requests, c.failed_requests, c.rays, c.rays_hit, c.invalid_rays, c.seconds_tracing, cache.hits,
+      cache.misses, cache.builds, cache.evictions, cache.resident_bricks, cache.resident_bytes,
+      cache.peak_resident_bytes, engine.cache().budget_bytes());
+}
+
+int run_serve(const ServeArgs& args) {
+  // Signals are taken synchronously by this thread (sigtimedwait below), so
+  // every thread started from here on (gRPC, TBB) inherits them blocked.
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGINT);
+  sigaddset(&stop_signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
+  spdlog::set_default_logger(spdlog::stderr_color_mt("outcore-serve"));
+  spdlog::set_level(spdlog::level::from_str(args.log_level));
+
+  if (args.cache_mb == 0 || args.cache_mb > (std::numeric_limits<uint64_t>::max() >> 20)) {
+    return report_command_error("serve", "--cache-mb must be between 1 and " +
+                                             std::to_string(std::numeric_limits<uint64_t>::max() >> 20) +
+                                             ", got " + std::to_string(args.cache_mb));
+  }
+  // gRPC takes message limits as int.
+  if (args.max_message_mb == 0 || args.max_message_mb > 2047) {
+    return report_command_error(
+        "serve", "--max-message-mb must be between 1 and 2047, got " + std::to_string(args.max_message_mb));
+  }
+  if (args.threads < 0) return report_command_error("serve", "--threads must be >= 0 (0: all cores)");
+  if (args.rpc_threads < 2) return report_command_error("serve", "--rpc-threads must be at least 2");
+  const auto colon = args.listen.rfind(':');
+  if (colon == std::string::npos || colon == 0 || colon + 1 == args.listen.size()) {
+    return report_command_error("serve", "--listen '" + args.listen + "' is not HOST:PORT");
+  }
+
+  std::unique_ptr<tbb::global_control> threads;
+  if (args.threads > 0) {
+    threads =
+        std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, args.threads);
+  }
+  EngineOptions engine_options;
+  engine_options.cache_bytes = args.cache_mb << 20;
+  engine_options.eviction_policy = args.policy;
+  engine_options.brick_accel = args.brick_accel;
+  auto engine = QueryEngine::open(args.scene, engine_options);
+  if (!engine.ok()) return report_command_error("serve", engine.status().message());
+
+  server::ServiceOptions service_options;
+  service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
+  server::SceneQueryService service(**engine, service_options);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  int port = 0;
+  builder.AddListeningPort(args.listen, grpc::InsecureServerCredentials(), &port);
+  // gRPC sets SO_REUSEPORT by default: a second server on a taken port would
+  // silently share it. A busy port is an error instead.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  builder.SetMaxReceiveMessageSize(static_cast<int>(service_options.max_message_bytes));
+  builder.SetMaxSendMessageSize(static_cast<int>(service_options.max_message_bytes));
+  // The sync server runs each call on a thread of its own; the quota bounds
+  // them (calls beyond it wait for a thread).
+  grpc::ResourceQuota quota("outcore-serve");
+  quota.SetMaxThreads(args.rpc_threads);
+  builder.SetResourceQuota(quota);
+  builder.RegisterService(&service);
+  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
+  if (!server || port == 0) return report_command_error("serve", "cannot listen on " + args.listen);
+  // The health service answers SERVING from here on (the scene is open), for
+  // the server as a whole ("") and for the service by name.
+  server->GetHealthCheckService()->SetServingStatus(v1::SceneQuery::service_full_name(), true);
+  const std::string address = args.listen.substr(0, colon) + ":" + std::to_string(port);
+  std::printf("listening on %s\n", address.c_str());
+  std::fflush(stdout);
+  const Manifest& manifest = (*engine)->store().manifest();
+  spdlog::info("serving {} ({} triangles, {} bricks, cache budget {} MiB) on {}", args.scene,
+               manifest.triangle_count, (*engine)->store().brick_count(), args.cache_mb, address);
+
+  int signal_number = 0;
+  auto last_summary = std::chrono::steady_clock::now();
+  uint64_t requests_at_summary = 0;
+  while (signal_number <= 0) {
+    const timespec tick{1, 0};
+    signal_number = sigtimedwait(&stop_signals, nullptr, &tick);
+    const auto now = std::chrono::steady_clock::now();
+    if (signal_number <= 0 && now - last_summary >= kSummaryInterval) {
+      const uint64_t requests = service.counters().requests;
+      if (requests != requests_at_summary) log_summary(service, **engine);
+      requests_at_summary = requests;
+      last_summary = now;
+    }
+  }
+  spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, kDrainDeadline.count());
+  server->GetHealthCheckService()->Shutdown();  // NOT_SERVING from now on
+  server->Shutdown(std::chrono::system_clock::now() + kDrainDeadline);
+  server->Wait();
+  log_summary(service, **engine);
+  spdlog::info("stopped");
+  return 0;
+}
+
+}  // namespace
+
+void add_serve_command(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<ServeArgs>();
+  CLI::App* cmd = app.add_subcommand("serve", "Answer ray queries against a scene store over gRPC");
+  cmd->add_option("scene", args->scene, "Scene store directory")->required();
+  cmd->add_option("--listen", args->listen, "HOST:PORT to listen on (port 0: any free port)")
+      ->capture_default_str();
+  cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
+  cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
+  cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
+  cmd->add_option("--threads", args->threads, "Engine worker threads (default: all cores)");
+  cmd->add_option("--rpc-threads", args->rpc_threads, "Most threads serving calls at once")
+      ->capture_default_str();
+  cmd->add_option("--max-message-mb", args->max_message_mb, "Largest message either way, MiB")
+      ->capture_default_str();
+  cmd->add_option("--log-level", args->log_level, "Log level")
+      ->check(CLI::IsMember({"debug", "info", "warn"}))
+      ->capture_default_str();
+  cmd->callback([args, &exit_code] { exit_code = run_serve(*args); });
+}
+
+}  // namespace outcore

@@ -1,0 +1,18 @@
+// `outcore serve SCENE [--listen HOST:PORT] ...`: opens a scene store and
+// answers outcore.v1.SceneQuery over gRPC (with grpc.health.v1 and server
+// reflection) until SIGINT/SIGTERM, then drains in-flight calls (at most 10 s)
+// and exits 0. Prints "listening on HOST:PORT" on stdout once it accepts
+// calls (the real port when PORT is 0); logs go to stderr.
+//
+// Thread-safety: called once from main().
+#pragma once
+
+namespace CLI {
+class App;
+}
+
+namespace outcore {
+
+void add_serve_command(CLI::App& app, int& exit_code);
+
+}  // namespace outcore

@@ -1,0 +1,261 @@
+"""outcore.SceneClient end to end against real `outcore serve` processes:
+results equal `outcore trace` bit for bit (unary and streamed batches), input
+handling, errors, scene info and stats."""
+
+
+import numpy as np
+import pytest
+
+import outcore
+from support import SPHERE, Server, make_rays, trace
+
+HIT_KEYS = ("t_hit", "geometry_ids", "primitive_ids", "primitive_uvs", "primitive_normals")
+
+
+def bits(a):
+    return np.asarray(a).view(np.uint32)
+
+
+def assert_equals_trace_bitwise(result, reference):
+    assert set(result) == set(HIT_KEYS)
+    assert np.array_equal(bits(result["t_hit"]), bits(reference["t_hit"]))
+    assert np.array_equal(result["geometry_ids"], reference["geometry_id"])
+    assert np.array_equal(result["primitive_ids"], reference["primitive_id"])
+    assert np.array_equal(bits(result["primitive_uvs"][:, 0]), bits(reference["u"]))
+    assert np.array_equal(bits(result["primitive_uvs"][:, 1]), bits(reference["v"]))
+    assert np.array_equal(bits(result["primitive_normals"]), bits(reference["ng"]))
+
+
+@pytest.fixture
+def client(server):
+    with outcore.SceneClient(server.address, timeout=60) as c:
+        yield c
+
+
+@pytest.mark.parametrize("columns", [6, 8])
+def test_cast_rays_equals_trace_bitwise(client, store, bounds, tmp_path, columns):
+    rays = make_rays(bounds, 3000, seed=columns, columns=columns)
+    result = client.cast_rays(rays)
+    reference = trace(store, rays, tmp_path)
+    assert_equals_trace_bitwise(result, reference)
+    hit = np.isfinite(result["t_hit"])
+    assert 0.1 < hit.mean() < 0.9, "rays should mix hits and misses"
+    assert set(np.unique(result["geometry_ids"][hit])) == {0, 1}  # the sphere and the bunny
+    assert np.all(result["primitive_ids"][~hit] == outcore.INVALID_ID)
+    assert np.all(result["geometry_ids"][~hit] == outcore.INVALID_ID)
+    assert client.last_stats["rays"] == len(rays)
+
+
+def test_result_dtypes_shapes_and_read_only_views(client, bounds):
+    result = client.cast_rays(make_rays(bounds, 100, seed=3))
+    expected = {
+        "t_hit": (np.float32, (100,)),
+        "geometry_ids": (np.uint32, (100,)),
+        "primitive_ids": (np.uint32, (100,)),
+        "primitive_uvs": (np.float32, (100, 2)),
+        "primitive_normals": (np.float32, (100, 3)),
+    }
+    for key, (dtype, shape) in expected.items():
+        assert result[key].dtype == dtype, key
+        assert result[key].shape == shape, key
+        # Zero-copy: views of one reply buffer, hence read-only.
+        assert not result[key].flags.writeable, key
+        assert result[key].base is not None, key
+    writable = np.array(result["t_hit"])
+    writable[:] = 0  # a copy is an ordinary array
+
+
+def test_streamed_batch_equals_trace_bitwise(small_server, store, bounds, tmp_path):
+    # 1 MiB messages hold ~32k hits: this batch needs 5 chunks.
+    rays = make_rays(bounds, 150_000, seed=11, columns=8)
+    with outcore.SceneClient(small_server.address, timeout=120) as client:
+        assert client.scene_info()["max_message_bytes"] == 1 << 20
+        requests_before = client.stats()["requests"]
+        result = client.cast_rays(rays)
+        requests = client.stats()["requests"] - requests_before
+        occluded = client.test_occlusions(rays)
+    assert requests >= 5, "the batch should have gone as several stream chunks"
+    assert_equals_trace_bitwise(result, trace(store, rays, tmp_path))
+    assert np.array_equal(occluded, trace(store, rays, tmp_path, any_hit=True))
+    assert client.last_stats["rays"] == len(rays)
+
+
+def test_explicit_chunk_rays_streams_and_keeps_order(server, store, bounds, tmp_path):
+    rays = make_rays(bounds, 5000, seed=12)
+    with outcore.SceneClient(server.address, timeout=60, chunk_rays=777) as client:
+        before = client.stats()["requests"]
+        result = client.cast_rays(rays)
+        occluded = client.test_occlusions(rays)
+        after = client.stats()["requests"]
+    assert after - before == 2 * 7  # ceil(5000 / 777) chunks per query
+    assert_equals_trace_bitwise(result, trace(store, rays, tmp_path))
+    assert np.array_equal(occluded, trace(store, rays, tmp_path, any_hit=True))
+
+
+def test_oversize_unary_message_is_resource_exhausted_and_server_keeps_serving(small_server, bounds):
+    rays = make_rays(bounds, 60_000, seed=13)  # ~1.9 MiB of hits in one reply
+    with outcore.SceneClient(small_server.address, timeout=60, chunk_rays=len(rays)) as client:
+        with pytest.raises(outcore.OutcoreError) as error:
+            client.cast_rays(rays)
+        assert error.value.code == "RESOURCE_EXHAUSTED"
+        assert client.cast_rays(rays[:10])["t_hit"].shape == (10,)
+
+
+@pytest.mark.parametrize("columns", [6, 8])
+def test_occlusions_equal_trace_any_hit(client, store, bounds, tmp_path, columns):
+    rays = make_rays(bounds, 3000, seed=20 + columns, columns=columns)
+    occluded = client.test_occlusions(rays)
+    assert occluded.dtype == np.bool_ and occluded.shape == (3000,)
+    assert np.array_equal(occluded, trace(store, rays, tmp_path, any_hit=True))
+    # Consistent with the closest hit where both apply.
+    assert np.array_equal(occluded, np.isfinite(client.cast_rays(rays)["t_hit"]))
+
+
+def test_six_columns_mean_default_tnear_and_tfar(client, bounds):
+    rays6 = make_rays(bounds, 2000, seed=30)
+    rays8 = np.concatenate(
+        [rays6, np.zeros((2000, 1), np.float32), np.full((2000, 1), np.inf, np.float32)], axis=1
+    )
+    a, b = client.cast_rays(rays6), client.cast_rays(rays8)
+    for key in HIT_KEYS:
+        assert np.array_equal(bits(a[key]), bits(b[key])), key
+    assert np.array_equal(client.test_occlusions(rays6), client.test_occlusions(rays8))
+
+
+def test_float64_and_non_contiguous_input_is_converted(client, bounds):
+    rays = make_rays(bounds, 1000, seed=40)
+    reference = client.cast_rays(rays)
+    as_float64 = rays.astype(np.float64)
+    strided = np.zeros((1000, 12), np.float32)[:, ::2]
+    strided[:] = rays
+    fortran = np.asfortranarray(rays)
+    for variant in (as_float64, strided, fortran, rays.tolist()):
+        result = client.cast_rays(variant)
+        for key in HIT_KEYS:
+            assert np.array_equal(bits(result[key]), bits(reference[key])), key
+
+
+def test_leading_batch_dims_give_results_of_the_same_shape(client, bounds):
+    rays = make_rays(bounds, 12 * 10, seed=50, columns=8)
+    flat = client.cast_rays(rays)
+    image = client.cast_rays(rays.reshape(12, 10, 8))
+    assert image["t_hit"].shape == (12, 10)
+    assert image["geometry_ids"].shape == (12, 10)
+    assert image["primitive_ids"].shape == (12, 10)
+    assert image["primitive_uvs"].shape == (12, 10, 2)
+    assert image["primitive_normals"].shape == (12, 10, 3)
+    for key in HIT_KEYS:
+        assert np.array_equal(bits(image[key]).reshape(bits(flat[key]).shape), bits(flat[key])), key
+    occluded = client.test_occlusions(rays.reshape(2, 6, 10, 8))
+    assert occluded.shape == (2, 6, 10)
+    assert np.array_equal(occluded.reshape(-1), client.test_occlusions(rays))
+
+
+def test_empty_batch_needs_no_call():
+    # Nothing listens here: an empty batch must not even try.
+    with outcore.SceneClient("127.0.0.1:1", timeout=5) as client:
+        result = client.cast_rays(np.zeros((0, 6), np.float32))
+        assert result["t_hit"].shape == (0,) and result["primitive_uvs"].shape == (0, 2)
+        assert client.test_occlusions(np.zeros((0, 4, 8), np.float32)).shape == (0, 4)
+
+
+@pytest.mark.parametrize(
+    "rays", [np.zeros((4, 7), np.float32), np.zeros(6, np.float32), np.zeros((4, 6), np.complex64),
+             np.array([["x"] * 6])]
+)
+def test_wrong_rays_are_a_value_error(client, rays):
+    with pytest.raises(ValueError, match="rays must"):
+        client.cast_rays(rays)
+    with pytest.raises(ValueError, match="rays must"):
+        client.test_occlusions(rays)
+
+
+def test_strict_nan_ray_is_an_error_naming_its_index(client, bounds):
+    rays = make_rays(bounds, 50, seed=60)
+    rays[37, 4] = np.nan
+    with pytest.raises(outcore.OutcoreError) as error:
+        client.cast_rays(rays, strict=True)
+    assert isinstance(error.value, RuntimeError)
+    assert error.value.code == "INVALID_ARGUMENT"
+    assert "ray 37" in str(error.value)
+    with pytest.raises(outcore.OutcoreError, match="ray 37"):
+        client.test_occlusions(rays, strict=True)
+    # Not strict: the bad ray is a miss and the others are answered.
+    result = client.cast_rays(rays)
+    assert result["t_hit"][37] == np.inf and result["primitive_ids"][37] == outcore.INVALID_ID
+    assert client.last_stats["invalid_rays"] == 1
+
+
+def test_strict_nan_ray_in_a_later_stream_chunk_is_named_by_its_batch_index(server, bounds):
+    rays = make_rays(bounds, 3000, seed=61)
+    rays[2345, 0] = np.inf
+    with outcore.SceneClient(server.address, timeout=60, chunk_rays=1000) as client:
+        with pytest.raises(outcore.OutcoreError, match="ray 2345") as error:
+            client.cast_rays(rays, strict=True)
+        assert error.value.code == "INVALID_ARGUMENT"
+        assert client.cast_rays(rays[:5])["t_hit"].shape == (5,)  # still serving
+
+
+def test_scene_info_describes_the_store(client, store):
+    info = client.scene_info()
+    assert info["store_path"].rstrip("/").endswith(store.name)
+    assert info["inputs"][0]["spec"] == SPHERE
+    assert info["inputs"][1]["spec"].endswith("stanford-bunny.obj")
+    assert info["triangle_count"] == sum(i["triangle_count"] for i in info["inputs"])
+    assert info["brick_count"] > 1
+    assert len(info["bounds_lo"]) == 3 and len(info["bounds_hi"]) == 3
+    assert all(lo < hi for lo, hi in zip(info["bounds_lo"], info["bounds_hi"]))
+    assert info["max_message_bytes"] == 64 << 20
+    assert info["cache_budget_bytes"] > 0
+    assert isinstance(info["server_version"], str) and info["server_version"]
+
+
+def test_stats_count_the_rays_answered(client, bounds):
+    rays = make_rays(bounds, 1234, seed=70)
+    before = client.stats()
+    hits = np.isfinite(client.cast_rays(rays)["t_hit"]).sum()
+    after = client.stats()
+    # Other tests share this server, but none runs concurrently with this one.
+    assert after["rays"] - before["rays"] == 1234
+    assert after["rays_hit"] - before["rays_hit"] == hits
+    assert after["requests"] - before["requests"] == 1
+    assert after["cache_hits"] + after["cache_misses"] >= before["cache_hits"] + before["cache_misses"]
+    assert after["resident_bytes"] <= after["cache_budget_bytes"]
+    assert after["eviction_policy"]
+
+
+@pytest.mark.parametrize("chunk_rays", [200_000, 20_000], ids=["unary", "streamed"])
+def test_deadline_exceeded_is_named_and_server_stays_healthy(server, bounds, chunk_rays):
+    rays = make_rays(bounds, 200_000, seed=80)
+    with outcore.SceneClient(server.address, timeout=1e-4, chunk_rays=chunk_rays) as client:
+        with pytest.raises(outcore.OutcoreError) as error:
+            client.cast_rays(rays)
+        assert error.value.code == "DEADLINE_EXCEEDED"
+        assert "DEADLINE_EXCEEDED" in str(error.value)
+    with outcore.SceneClient(server.address, timeout=60) as client:
+        assert client.cast_rays(rays[:10])["t_hit"].shape == (10,)
+
+
+def test_unreachable_server_is_unavailable():
+    with outcore.SceneClient("127.0.0.1:1", timeout=5) as client:
+        with pytest.raises(outcore.OutcoreError) as error:
+            client.scene_info()
+        assert error.value.code == "UNAVAILABLE"
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [dict(address=""), dict(timeout=0), dict(timeout=-1), dict(max_message_mb=0), dict(chunk_rays=0),
+     dict(chunk_rays=2.5)],
+)
+def test_bad_client_options_are_a_value_error(kwargs):
+    args = dict(address="127.0.0.1:1") | kwargs
+    with pytest.raises(ValueError):
+        outcore.SceneClient(**args)
+
+
+def test_sigterm_drains_and_exits_zero(store):
+    server = Server(store)
+    with outcore.SceneClient(server.address, timeout=30) as client:
+        assert client.scene_info()["triangle_count"] > 0
+    assert server.stop() == 0

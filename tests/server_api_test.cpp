@@ -1,0 +1,516 @@
+// Tests of the gRPC API against a real `outcore serve` on a loopback port,
+// through the C++ client library and raw stubs: 16 concurrent clients each get
+// exactly their serial in-process answer; health reports SERVING; reflection
+// lists the service; an expired deadline is DEADLINE_EXCEEDED and the server
+// stays healthy; bad requests (byte lengths, counts, layout version and
+// layout, NaN rays under strict, oversize messages and replies) are
+// INVALID_ARGUMENT / RESOURCE_EXHAUSTED naming the field or ray, and the server
+// answers a good request after each; a client cancelling mid-stream costs
+// nothing; SIGTERM and SIGINT drain an in-flight stream and exit 0.
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/cpp/scene_client.h"
+#include "core/query/query_engine.h"
+#include "core/store/scene_store.h"
+#include "grpc/health/v1/health.grpc.pb.h"
+#include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
+#include "outcore/v1/scene_query.grpc.pb.h"
+#include "tests/support/server_process.h"
+#include "tests/support/subprocess.h"
+#include "tests/support/test_paths.h"
+#include "tests/support/test_rays.h"
+
+namespace outcore {
+namespace {
+
+using testing::contains;
+using testing::ServerProcess;
+using testing::SubprocessResult;
+using testing::TempDir;
+
+std::string hit_bytes(std::span<const Hit> hits) {
+  return std::string(reinterpret_cast<const char*>(hits.data()), hits.size_bytes());
+}
+
+v1::QueryRequest make_request(std::span<const Ray> rays, uint64_t sequence = 0) {
+  v1::QueryRequest request;
+  v1::RayBatch* batch = request.mutable_batch();
+  batch->set_layout_version(1);
+  batch->set_ray_layout(v1::RAY_LAYOUT_F32X8);
+  batch->set_ray_count(rays.size());
+  batch->set_rays(reinterpret_cast<const char*>(rays.data()), rays.size_bytes());
+  request.set_sequence(sequence);
+  return request;
+}
+
+class ServerApi : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new TempDir();
+    store_ = dir_->file("scene");
+    const SubprocessResult packed =
+        testing::run_outcore({"pack", "gen:sphere?level=3", "gen:torus?cx=3", "-o", store_, "--brick-tris",
+                              "200", "-q", "--no-sync"},
+                             std::chrono::milliseconds(120'000));
+    ASSERT_TRUE(packed.succeeded()) << packed.describe();
+    auto engine = QueryEngine::open(store_, EngineOptions{});
+    ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+    engine_ = engine->release();
+    std::string error;
+    server_ =
+        ServerProcess::start(store_, {"--max-message-mb", "1", "--log-level", "debug"}, error).release();
+    ASSERT_NE(server_, nullptr) << error;
+  }
+  static void TearDownTestSuite() {
+    if (server_ != nullptr) {
+      EXPECT_EQ(server_->stop(SIGTERM), 0) << server_->log();
+    }
+    delete server_;
+    delete engine_;
+    delete dir_;
+    server_ = nullptr;
+    engine_ = nullptr;
+    dir_ = nullptr;
+  }
+
+  void SetUp() override {
+    ASSERT_NE(server_, nullptr) << "suite setup failed";
+    grpc::ChannelArguments arguments;
+    arguments.SetMaxReceiveMessageSize(-1);
+    arguments.SetMaxSendMessageSize(-1);
+    channel_ = grpc::CreateCustomChannel(server_->address(), grpc::InsecureChannelCredentials(), arguments);
+    stub_ = v1::SceneQuery::NewStub(channel_);
+  }
+
+  static std::vector<Ray> rays(std::size_t n, uint32_t seed) {
+    return testing::make_test_rays(engine_->store().manifest().bounds, n, seed);
+  }
+  static std::vector<Hit> serial_hits(std::span<const Ray> r) {
+    std::vector<Hit> hits(r.size());
+    EXPECT_TRUE(engine_->intersect(r, hits, QueryOptions{}).ok());
+    return hits;
+  }
+  static std::vector<uint8_t> serial_occluded(std::span<const Ray> r) {
+    std::vector<uint8_t> flags(r.size());
+    EXPECT_TRUE(engine_->occluded(r, flags, QueryOptions{}).ok());
+    return flags;
+  }
+
+  grpc::Status intersect(const v1::QueryRequest& request, v1::IntersectResponse* response = nullptr) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    v1::IntersectResponse local;
+    return stub_->Intersect(&context, request, response ? response : &local);
+  }
+
+  // A good request is answered right (the server is still serving).
+  void expect_serving() {
+    const std::vector<Ray> r = rays(500, 99);
+    v1::IntersectResponse response;
+    const grpc::Status status = intersect(make_request(r), &response);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_TRUE(response.hits() == hit_bytes(serial_hits(r)));
+  }
+
+  void expect_error(const v1::QueryRequest& request, grpc::StatusCode code,
+                    const std::vector<std::string>& parts) {
+    const grpc::Status status = intersect(request);
+    EXPECT_EQ(status.error_code(), code) << status.error_message();
+    for (const std::string& part : parts) {
+      EXPECT_TRUE(contains(status.error_message(), part))
+          << "'" << part << "' not in: " << status.error_message();
+    }
+    expect_serving();
+  }
+
+  static TempDir* dir_;
+  static std::string store_;
+  static QueryEngine* engine_;
+  static ServerProcess* server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::SceneQuery::Stub> stub_;
+};
+
+TempDir* ServerApi::dir_ = nullptr;
+std::string ServerApi::store_;
+QueryEngine* ServerApi::engine_ = nullptr;
+ServerProcess* ServerApi::server_ = nullptr;
+
+TEST_F(ServerApi, SixteenConcurrentClientsGetTheirSerialAnswers) {
+  constexpr int kClients = 16;
+  std::vector<std::vector<Ray>> batches;
+  std::vector<std::string> want;
+  for (int c = 0; c < kClients; ++c) {
+    batches.push_back(rays(1500 + 700 * c, 1000 + c));
+    if (c % 2 == 0) {
+      want.push_back(hit_bytes(serial_hits(batches.back())));
+    } else {
+      const std::vector<uint8_t> flags = serial_occluded(batches.back());
+      want.emplace_back(flags.begin(), flags.end());
+    }
+  }
+  std::vector<std::string> got(kClients);
+  std::vector<std::string> errors(kClients);
+  std::vector<std::thread> threads;
+  for (int c = 0; c < kClients; ++c) {
+    threads.emplace_back([&, c] {
+      auto client = client::SceneClient::connect(server_->address());
+      if (!client.ok()) {
+        errors[c] = client.status().to_string();
+        return;
+      }
+      client::CallOptions options;
+      options.chunk_rays = c % 4 == 1 ? 1000 : 0;  // some clients stream
+      options.deadline_seconds = 120;
+      for (int repeat = 0; repeat < 2; ++repeat) {
+        Status status;
+        if (c % 2 == 0) {
+          std::vector<Hit> hits(batches[c].size());
+          status = (*client)->intersect(batches[c], hits, options);
+          got[c] = hit_bytes(hits);
+        } else {
+          std::vector<uint8_t> flags(batches[c].size());
+          status = (*client)->occluded(batches[c], flags, options);
+          got[c].assign(flags.begin(), flags.end());
+        }
+        if (!status.ok()) errors[c] = status.to_string();
+        if (!errors[c].empty() || got[c] != want[c]) return;
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  for (int c = 0; c < kClients; ++c) {
+    EXPECT_EQ(errors[c], "") << "client " << c;
+    EXPECT_TRUE(got[c] == want[c]) << "client " << c << " got another answer than its serial one";
+  }
+}
+
+TEST_F(ServerApi, ClientLibraryStreamsBigBatchesAndReportsStats) {
+  auto client = client::SceneClient::connect(server_->address());
+  ASSERT_TRUE(client.ok()) << client.status().to_string();
+  EXPECT_EQ((*client)->connected_scene().max_message_bytes(), uint64_t{1} << 20);
+  EXPECT_LT((*client)->max_chunk_rays(), 40'000u);
+  const std::vector<Ray> r = rays(90'000, 5);
+  std::vector<Hit> hits(r.size());
+  client::CallStats stats;
+  ASSERT_TRUE((*client)->intersect(r, hits, {}, &stats).ok());
+  EXPECT_TRUE(hit_bytes(hits) == hit_bytes(serial_hits(r)));
+  EXPECT_EQ(stats.messages, 3u);
+  EXPECT_EQ(stats.engine.rays(), r.size());
+  uint64_t hit_count = 0;
+  for (const Hit& h : hits) hit_count += h.is_hit();
+  EXPECT_EQ(stats.engine.rays_hit(), hit_count);
+  // Zero rays: nothing to send, nothing to answer.
+  EXPECT_TRUE((*client)->intersect({}, {}, {}).ok());
+  EXPECT_EQ((*client)->intersect(r, std::span<Hit>(hits).first(5), {}).code(), StatusCode::kInvalidArgument);
+
+  auto server_stats = (*client)->stats();
+  ASSERT_TRUE(server_stats.ok()) << server_stats.status().to_string();
+  EXPECT_GE(server_stats->requests(), 3u);
+  EXPECT_GE(server_stats->rays(), r.size());
+  EXPECT_GT(server_stats->cache_hits() + server_stats->cache_misses(), 0u);
+  EXPECT_EQ(server_stats->cache_budget_bytes(), uint64_t{1024} << 20);
+  EXPECT_EQ(server_stats->eviction_policy(), "lru");
+}
+
+TEST_F(ServerApi, SceneInfoDescribesTheStore) {
+  auto client = client::SceneClient::connect(server_->address());
+  ASSERT_TRUE(client.ok()) << client.status().to_string();
+  const v1::SceneInfo& info = (*client)->connected_scene();
+  const Manifest& manifest = engine_->store().manifest();
+  EXPECT_EQ(info.triangle_count(), manifest.triangle_count);
+  EXPECT_EQ(info.brick_count(), engine_->store().brick_count());
+  ASSERT_EQ(info.inputs_size(), 2);
+  EXPECT_EQ(info.inputs(0).spec(), "gen:sphere?level=3");
+  EXPECT_EQ(info.inputs(1).triangle_count(), manifest.inputs[1].triangle_count);
+  ASSERT_EQ(info.bounds_lo_size(), 3);
+  EXPECT_EQ(info.bounds_lo(0), manifest.bounds.lo.x);
+  EXPECT_EQ(info.bounds_hi(2), manifest.bounds.hi.z);
+  EXPECT_EQ(info.brick_accel(), "embree");
+  EXPECT_EQ(info.server_version(), OUTCORE_VERSION);
+  EXPECT_EQ(info.upper_depth(), manifest.upper.depth());
+}
+
+void expect_health_serving(const std::shared_ptr<grpc::Channel>& channel) {
+  auto health = grpc::health::v1::Health::NewStub(channel);
+  for (const std::string service : {"", "outcore.v1.SceneQuery"}) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    grpc::health::v1::HealthCheckRequest request;
+    request.set_service(service);
+    grpc::health::v1::HealthCheckResponse response;
+    const grpc::Status status = health->Check(&context, request, &response);
+    ASSERT_TRUE(status.ok()) << "'" << service << "': " << status.error_message();
+    EXPECT_EQ(response.status(), grpc::health::v1::HealthCheckResponse::SERVING) << "'" << service << "'";
+  }
+}
+
+TEST_F(ServerApi, HealthReportsServing) {
+  expect_health_serving(channel_);
+}
+
+TEST_F(ServerApi, ReflectionListsTheService) {
+  auto reflection = grpc::reflection::v1alpha::ServerReflection::NewStub(channel_);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  auto stream = reflection->ServerReflectionInfo(&context);
+  grpc::reflection::v1alpha::ServerReflectionRequest request;
+  request.set_list_services("");
+  ASSERT_TRUE(stream->Write(request));
+  // And the file that defines it, so grpcurl-style tools can build requests.
+  request.set_file_containing_symbol("outcore.v1.SceneQuery");
+  ASSERT_TRUE(stream->Write(request));
+  stream->WritesDone();
+  grpc::reflection::v1alpha::ServerReflectionResponse response;
+  ASSERT_TRUE(stream->Read(&response));
+  std::set<std::string> names;
+  for (const auto& s : response.list_services_response().service()) names.insert(s.name());
+  EXPECT_TRUE(names.count("outcore.v1.SceneQuery")) << "services listed: " << names.size();
+  EXPECT_TRUE(names.count("grpc.health.v1.Health"));
+  ASSERT_TRUE(stream->Read(&response));
+  EXPECT_GT(response.file_descriptor_response().file_descriptor_proto_size(), 0);
+  EXPECT_TRUE(stream->Finish().ok());
+}
+
+TEST_F(ServerApi, ExpiredDeadlineIsDeadlineExceededAndTheServerStaysHealthy) {
+  auto client = client::SceneClient::connect(server_->address());
+  ASSERT_TRUE(client.ok()) << client.status().to_string();
+  const std::vector<Ray> r = rays(200'000, 6);
+  std::vector<Hit> hits(r.size());
+  client::CallOptions options;
+  options.deadline_seconds = 0.002;
+  const Status status = (*client)->intersect(r, hits, options);
+  EXPECT_EQ(status.code(), StatusCode::kCancelled) << status.to_string();
+  EXPECT_TRUE(contains(status.message(), "DEADLINE_EXCEEDED")) << status.message();
+  // Also a unary call straight on the stub.
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(1));
+  v1::IntersectResponse response;
+  const std::vector<Ray> small = rays(30'000, 7);
+  EXPECT_EQ(stub_->Intersect(&context, make_request(small), &response).error_code(),
+            grpc::StatusCode::DEADLINE_EXCEEDED);
+  expect_serving();
+  expect_health_serving(channel_);
+}
+
+TEST_F(ServerApi, MalformedBatchesAreInvalidArgumentNamingTheField) {
+  const std::vector<Ray> r = rays(10, 8);
+  v1::QueryRequest request = make_request(r);
+  request.mutable_batch()->mutable_rays()->push_back('x');
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"batch.rays", "321 bytes", "32-byte"});
+
+  request = make_request(r);
+  request.mutable_batch()->set_ray_count(11);
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"batch.ray_count is 11", "holds 10 rays"});
+
+  request = make_request(r);
+  request.mutable_batch()->set_layout_version(2);
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"batch.layout_version is 2"});
+
+  request = make_request(r);
+  request.mutable_batch()->set_ray_layout(v1::RAY_LAYOUT_UNSPECIFIED);
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"batch.ray_layout", "RAY_LAYOUT_UNSPECIFIED"});
+
+  request = make_request(r);
+  request.mutable_batch()->set_ray_layout(static_cast<v1::RayLayout>(77));
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"batch.ray_layout", "77"});
+
+  // No batch at all: layout version 0.
+  expect_error(v1::QueryRequest(), grpc::StatusCode::INVALID_ARGUMENT, {"batch.layout_version is 0"});
+
+  // Six floats per ray: 10 rays are 240 bytes, so 320 bytes are 13.33 rays.
+  request = make_request(r);
+  request.mutable_batch()->set_ray_layout(v1::RAY_LAYOUT_F32X6);
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"batch.rays", "24-byte", "RAY_LAYOUT_F32X6"});
+}
+
+TEST_F(ServerApi, SixFloatRaysGetDefaultLimits) {
+  std::vector<Ray> r = rays(2000, 9);
+  std::string six;
+  for (Ray& ray : r) {
+    const float row[6] = {ray.origin.x,    ray.origin.y,    ray.origin.z,
+                          ray.direction.x, ray.direction.y, ray.direction.z};
+    six.append(reinterpret_cast<const char*>(row), sizeof row);
+    ray.tnear = 0;
+    ray.tfar = std::numeric_limits<float>::infinity();
+  }
+  v1::QueryRequest request = make_request(r);
+  request.mutable_batch()->set_ray_layout(v1::RAY_LAYOUT_F32X6);
+  request.mutable_batch()->set_rays(six);
+  v1::IntersectResponse response;
+  const grpc::Status status = intersect(request, &response);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_TRUE(response.hits() == hit_bytes(serial_hits(r)));
+}
+
+TEST_F(ServerApi, StrictNanRayIsNamedByIndex) {
+  std::vector<Ray> r = rays(100, 10);
+  r[37].direction.y = std::numeric_limits<float>::quiet_NaN();
+  v1::QueryRequest request = make_request(r);
+  request.set_strict(true);
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"ray 37:"});
+  // Without strict it is a miss, counted as invalid.
+  request.set_strict(false);
+  v1::IntersectResponse response;
+  ASSERT_TRUE(intersect(request, &response).ok());
+  EXPECT_EQ(response.stats().invalid_rays(), 1u);
+  Hit h;
+  std::memcpy(static_cast<void*>(&h), response.hits().data() + 37 * sizeof(Hit), sizeof h);
+  EXPECT_FALSE(h.is_hit());
+
+  // In a stream the index counts every ray the call sent, and the chunk is named.
+  grpc::ClientContext context;
+  auto stream = stub_->IntersectStream(&context);
+  std::vector<Ray> chunk = rays(100, 11);
+  for (uint64_t c = 0; c < 3; ++c) {
+    if (c == 2) chunk[37].origin.x = std::numeric_limits<float>::infinity();
+    v1::QueryRequest part = make_request(chunk, c);
+    part.set_strict(true);
+    if (!stream->Write(part)) break;
+  }
+  stream->WritesDone();
+  int replies = 0;
+  while (stream->Read(&response)) ++replies;
+  const grpc::Status status = stream->Finish();
+  EXPECT_EQ(replies, 2);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_TRUE(contains(status.error_message(), "ray 237 (chunk 2, ray 37 of the chunk)"))
+      << status.error_message();
+  expect_serving();
+}
+
+// Embree aborts on components beyond +-1.844e18; the server refuses them in
+// every mode instead of dying.
+TEST_F(ServerApi, ComponentsBeyondTheIntersectorsRangeAreRefusedNotFatal) {
+  std::vector<Ray> r = rays(100, 13);
+  r[12].origin.x = 3e38f;
+  v1::QueryRequest request = make_request(r);
+  expect_error(request, grpc::StatusCode::INVALID_ARGUMENT, {"ray 12:", "1.844e18"});
+  r[12].origin.x = 0;
+  r[70].direction.z = -2e19f;
+  grpc::ClientContext context;
+  v1::OccludedResponse response;
+  const grpc::Status status = stub_->Occluded(&context, make_request(r), &response);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_TRUE(contains(status.error_message(), "ray 70:")) << status.error_message();
+  expect_serving();
+}
+
+TEST_F(ServerApi, OversizeMessagesAreResourceExhausted) {
+  // 40,000 rays: 1.28 MB against the 1 MiB limit.
+  const std::vector<Ray> big = rays(40'000, 12);
+  expect_error(make_request(big), grpc::StatusCode::RESOURCE_EXHAUSTED, {});
+  // Six-float rays fit (960 KB) but their hits would not: refused up front.
+  std::string six(big.size() * 24, '\0');
+  for (size_t i = 0; i < big.size(); ++i) std::memcpy(six.data() + i * 24, &big[i], 24);
+  v1::QueryRequest request = make_request(big);
+  request.mutable_batch()->set_ray_layout(v1::RAY_LAYOUT_F32X6);
+  request.mutable_batch()->set_rays(six);
+  expect_error(request, grpc::StatusCode::RESOURCE_EXHAUSTED,
+               {"reply", "max message size", "--max-message-mb"});
+}
+
+TEST_F(ServerApi, StreamRepliesEchoSequencesInOrder) {
+  grpc::ClientContext context;
+  auto stream = stub_->OccludedStream(&context);
+  std::vector<std::vector<Ray>> chunks;
+  for (uint64_t c = 0; c < 5; ++c) {
+    chunks.push_back(rays(300 + 100 * c, 20 + c));
+    ASSERT_TRUE(stream->Write(make_request(chunks.back(), 1000 + c)));
+  }
+  stream->WritesDone();
+  v1::OccludedResponse response;
+  for (uint64_t c = 0; c < 5; ++c) {
+    ASSERT_TRUE(stream->Read(&response));
+    EXPECT_EQ(response.sequence(), 1000 + c);
+    EXPECT_EQ(response.ray_count(), chunks[c].size());
+    const std::vector<uint8_t> want = serial_occluded(chunks[c]);
+    EXPECT_TRUE(response.occluded() == std::string(want.begin(), want.end())) << "chunk " << c;
+  }
+  EXPECT_FALSE(stream->Read(&response));
+  EXPECT_TRUE(stream->Finish().ok());
+}
+
+TEST_F(ServerApi, ClientCancellingMidStreamCostsOnlyItsOwnWork) {
+  for (int round = 0; round < 3; ++round) {
+    grpc::ClientContext context;
+    auto stream = stub_->IntersectStream(&context);
+    const std::vector<Ray> chunk = rays(5000, 30 + round);
+    ASSERT_TRUE(stream->Write(make_request(chunk, 0)));
+    v1::IntersectResponse response;
+    ASSERT_TRUE(stream->Read(&response));
+    for (uint64_t c = 1; c < 4; ++c) stream->Write(make_request(chunk, c));
+    context.TryCancel();
+    while (stream->Read(&response)) {
+    }
+    EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
+    expect_serving();
+  }
+  // A stream abandoned without WritesDone or Finish (the context goes away).
+  {
+    grpc::ClientContext context;
+    auto stream = stub_->OccludedStream(&context);
+    const std::vector<Ray> chunk = rays(1000, 40);
+    stream->Write(make_request(chunk, 0));
+  }
+  expect_serving();
+}
+
+// Separate servers: SIGTERM and SIGINT let an in-flight stream finish, then exit 0.
+void expect_signal_drains(const std::string& store, int signal_number, const std::vector<Ray>& chunk,
+                          const std::string& want) {
+  std::string error;
+  auto server = ServerProcess::start(store, {"--max-message-mb", "1"}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto channel = grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials());
+  auto stub = v1::SceneQuery::NewStub(channel);
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  auto stream = stub->IntersectStream(&context);
+  ASSERT_TRUE(stream->Write(make_request(chunk, 0)));
+  v1::IntersectResponse response;
+  ASSERT_TRUE(stream->Read(&response));  // the call is in flight on the server
+  server->signal(signal_number);
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  for (uint64_t c = 1; c < 4; ++c) ASSERT_TRUE(stream->Write(make_request(chunk, c))) << "chunk " << c;
+  stream->WritesDone();
+  int replies = 1;
+  while (stream->Read(&response)) {
+    EXPECT_TRUE(response.hits() == want);
+    ++replies;
+  }
+  const grpc::Status status = stream->Finish();
+  EXPECT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(replies, 4);
+  EXPECT_EQ(server->stop(signal_number), 0) << server->log();
+  EXPECT_TRUE(contains(server->log(), "draining")) << server->log();
+  // New calls are refused once it is gone.
+  grpc::ClientContext after;
+  after.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+  v1::SceneInfo info;
+  EXPECT_FALSE(stub->GetSceneInfo(&after, v1::GetSceneInfoRequest(), &info).ok());
+}
+
+TEST_F(ServerApi, SigtermDrainsAnInFlightStreamAndExitsZero) {
+  const std::vector<Ray> chunk = rays(2000, 50);
+  expect_signal_drains(store_, SIGTERM, chunk, hit_bytes(serial_hits(chunk)));
+}
+
+TEST_F(ServerApi, SigintDrainsAnInFlightStreamAndExitsZero) {
+  const std::vector<Ray> chunk = rays(2000, 51);
+  expect_signal_drains(store_, SIGINT, chunk, hit_bytes(serial_hits(chunk)));
+}
+
+}  // namespace
+}  // namespace outcore

@@ -1,0 +1,208 @@
+// End-to-end tests of `outcore query` against a real `outcore serve` on a
+// loopback port: the hits (and any-hit bools) files are bitwise the files
+// `outcore trace` writes on the same store, for unary batches and for batches
+// several times the server's max message size (streamed in chunks), on a
+// generated scene and on the Stanford bunny; bad query arguments and an
+// unreachable server are errors that name what is wrong.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/io/npy.h"
+#include "core/store/scene_store.h"
+#include "tests/support/server_process.h"
+#include "tests/support/subprocess.h"
+#include "tests/support/test_paths.h"
+#include "tests/support/test_rays.h"
+
+namespace outcore {
+namespace {
+
+using testing::contains;
+using testing::ServerProcess;
+using testing::SubprocessResult;
+using testing::TempDir;
+
+constexpr std::size_t kSmallBatch = 3000;
+// 3.2 MB of rays against a 1 MiB message limit: four chunks.
+constexpr std::size_t kBigBatch = 100'000;
+
+SubprocessResult outcore(std::vector<std::string> args) {
+  return testing::run_outcore(std::move(args), std::chrono::milliseconds(120'000));
+}
+
+std::string read_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream s;
+  s << in.rdbuf();
+  return std::move(s).str();
+}
+
+struct Scene {
+  std::string store;
+  std::string small_rays;
+  std::string big_rays;
+  std::unique_ptr<ServerProcess> server;
+};
+
+class ServerE2e : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    dir_ = new TempDir();
+    gen_ = new Scene();
+    bunny_ = new Scene();
+    prepare(*gen_, "gen", {"gen:sphere?level=3", "gen:torus?cx=3", "--brick-tris", "200"});
+    prepare(*bunny_, "bunny", {testing::model_path("stanford-bunny.obj"), "--brick-tris", "8000"});
+  }
+  static void TearDownTestSuite() {
+    delete gen_;
+    delete bunny_;
+    delete dir_;
+    gen_ = bunny_ = nullptr;
+    dir_ = nullptr;
+  }
+
+  static void prepare(Scene& scene, const std::string& name, std::vector<std::string> pack_args) {
+    scene.store = dir_->file(name);
+    pack_args.insert(pack_args.begin(), "pack");
+    for (const char* a : {"-o", "", "-q", "--no-sync"}) pack_args.push_back(a);
+    pack_args[pack_args.size() - 3] = scene.store;
+    const SubprocessResult packed = outcore(pack_args);
+    ASSERT_TRUE(packed.succeeded()) << packed.describe();
+    auto store = SceneStore::open(scene.store);
+    ASSERT_TRUE(store.ok()) << store.status().to_string();
+    const Aabb bounds = (*store)->manifest().bounds;
+    scene.small_rays = dir_->file(name + "-small.npy");
+    scene.big_rays = dir_->file(name + "-big.npy");
+    ASSERT_TRUE(write_rays_npy(scene.small_rays, testing::make_test_rays(bounds, kSmallBatch, 11)).ok());
+    ASSERT_TRUE(write_rays_npy(scene.big_rays, testing::make_test_rays(bounds, kBigBatch, 12)).ok());
+    std::string error;
+    scene.server = ServerProcess::start(scene.store, {"--max-message-mb", "1"}, error);
+    ASSERT_NE(scene.server, nullptr) << error;
+  }
+
+  void SetUp() override {
+    ASSERT_NE(gen_, nullptr);
+    ASSERT_NE(gen_->server, nullptr) << "suite setup failed";
+    ASSERT_NE(bunny_->server, nullptr) << "suite setup failed";
+  }
+
+  // Runs trace and query on the same rays and compares the files byte for byte;
+  // returns query's stdout.
+  static std::string expect_query_equals_trace(const Scene& scene, const std::string& rays, bool any_hit,
+                                               std::vector<std::string> query_extra = {}) {
+    static int counter = 0;
+    const std::string tag = std::to_string(counter++);
+    const std::string traced = dir_->file("trace-" + tag + ".npy");
+    const std::string queried = dir_->file("query-" + tag + ".npy");
+    std::vector<std::string> trace_args{"trace", scene.store, "--rays", rays, "-o", traced};
+    std::vector<std::string> query_args{"query", "--server", scene.server->address(), "--rays", rays, "-o",
+                                        queried, "--stats"};
+    if (any_hit) {
+      trace_args.push_back("--any-hit");
+      query_args.push_back("--any-hit");
+    }
+    query_args.insert(query_args.end(), query_extra.begin(), query_extra.end());
+    const SubprocessResult t = outcore(trace_args);
+    EXPECT_TRUE(t.succeeded()) << t.describe();
+    const SubprocessResult q = outcore(query_args);
+    EXPECT_TRUE(q.succeeded()) << q.describe() << "\nserver log:\n" << scene.server->log();
+    const std::string want = read_bytes(traced);
+    EXPECT_GT(want.size(), 128u);
+    EXPECT_TRUE(read_bytes(queried) == want)
+        << "query's " << (any_hit ? "bools" : "hits") << " differ from trace's for " << rays;
+    return q.stdout_text;
+  }
+
+  static TempDir* dir_;
+  static Scene* gen_;
+  static Scene* bunny_;
+};
+
+TempDir* ServerE2e::dir_ = nullptr;
+Scene* ServerE2e::gen_ = nullptr;
+Scene* ServerE2e::bunny_ = nullptr;
+
+TEST_F(ServerE2e, UnaryClosestHitsEqualTraceBitwise) {
+  const std::string out = expect_query_equals_trace(*gen_, gen_->small_rays, false);
+  EXPECT_TRUE(contains(out, "messages 1\n")) << out;
+}
+
+TEST_F(ServerE2e, UnaryAnyHitEqualsTraceBitwise) {
+  expect_query_equals_trace(*gen_, gen_->small_rays, true);
+}
+
+TEST_F(ServerE2e, BatchSeveralTimesTheMaxMessageIsStreamedAndEqualsTrace) {
+  const std::string out = expect_query_equals_trace(*gen_, gen_->big_rays, false);
+  EXPECT_TRUE(contains(out, "messages 4\n")) << out;
+  const std::string any = expect_query_equals_trace(*gen_, gen_->big_rays, true);
+  EXPECT_TRUE(contains(any, "messages 4\n")) << any;
+}
+
+TEST_F(ServerE2e, UnevenChunksKeepTheirOrder) {
+  const std::string out = expect_query_equals_trace(*gen_, gen_->big_rays, false, {"--chunk-rays", "7001"});
+  EXPECT_TRUE(contains(out, "messages 15\n")) << out;
+  // A small batch split into many chunks, one of them a single ray.
+  const std::string small =
+      expect_query_equals_trace(*gen_, gen_->small_rays, true, {"--chunk-rays", "2999"});
+  EXPECT_TRUE(contains(small, "messages 2\n")) << small;
+}
+
+TEST_F(ServerE2e, StrictAndNoReorderGiveTheSameAnswer) {
+  expect_query_equals_trace(*gen_, gen_->small_rays, false,
+                            {"--no-reorder", "--strict", "--deadline-s", "60"});
+}
+
+TEST_F(ServerE2e, BunnyUnaryAndStreamedEqualTrace) {
+  expect_query_equals_trace(*bunny_, bunny_->small_rays, false);
+  expect_query_equals_trace(*bunny_, bunny_->small_rays, true);
+  const std::string out = expect_query_equals_trace(*bunny_, bunny_->big_rays, false);
+  EXPECT_TRUE(contains(out, "messages 4\n")) << out;
+  expect_query_equals_trace(*bunny_, bunny_->big_rays, true);
+}
+
+TEST_F(ServerE2e, QueryErrorsNameWhatIsWrong) {
+  const std::string out = dir_->file("never.npy");
+  SubprocessResult r =
+      outcore({"query", "--server", gen_->server->address(), "--rays", dir_->file("missing.npy"), "-o", out});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "missing.npy")) << r.stderr_text;
+  // Nothing listens on port 1.
+  r = outcore(
+      {"query", "--server", "127.0.0.1:1", "--rays", gen_->small_rays, "-o", out, "--deadline-s", "5"});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "127.0.0.1:1")) << r.stderr_text;
+  EXPECT_TRUE(contains(r.stderr_text, "UNAVAILABLE")) << r.stderr_text;
+  r = outcore({"query", "--server", gen_->server->address(), "--rays", gen_->small_rays, "-o", out,
+               "--deadline-s", "-1"});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "--deadline-s")) << r.stderr_text;
+  EXPECT_FALSE(std::ifstream(out).good()) << "a failed query wrote its output";
+}
+
+TEST_F(ServerE2e, ServeRejectsBadOptionsAndMissingStores) {
+  SubprocessResult r = outcore({"serve", dir_->file("no-such-store")});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "no-such-store")) << r.stderr_text;
+  r = outcore({"serve", gen_->store, "--max-message-mb", "0"});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "--max-message-mb")) << r.stderr_text;
+  r = outcore({"serve", gen_->store, "--log-level", "loud"});
+  EXPECT_NE(r.exit_code, 0) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "loud")) << r.stderr_text;
+  r = outcore({"serve", gen_->store, "--listen", "nonsense"});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "nonsense")) << r.stderr_text;
+  // The port is taken by the running server.
+  r = outcore({"serve", gen_->store, "--listen", gen_->server->address()});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "cannot listen on")) << r.stderr_text;
+}
+
+}  // namespace
+}  // namespace outcore
