@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # The README's main-job command: installs what is missing, builds, packs the
 # built-in procedural scene (a city of 2,000 icospheres on a fractal terrain,
-# about 10.4 M triangles) into a scene store, describes it, and traces 1 M
-# camera rays against it in process under a 256 MiB cache budget (a fraction of
-# the scene's built size), printing a few hits and the cache figures.
+# about 10.4 M triangles) into a scene store, describes it, starts `outcore
+# serve` on a loopback port under a 256 MiB cache budget (a fraction of the
+# scene's built size), queries 1 M camera rays from the C++ CLI and from the
+# Python client, prints a few hits and the cache figures, stops the server
+# (SIGTERM), and checks that in-process `outcore trace` answers identically.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install.sh
@@ -21,18 +23,63 @@ echo "== outcore info"
 "$bin" info "$scene" --json > "$work/city.json"
 .venv/bin/python bench/make_rays.py "$work/city.json" camera 1000000 "$work/camera.npy"
 echo
-echo "== outcore trace (1 M camera rays, --cache-mb 256, cold then warm)"
-"$bin" trace "$scene" --rays "$work/camera.npy" -o "$work/hits.npy" --cache-mb 256 --repeat 2 --stats
+echo "== outcore serve (loopback, --cache-mb 256)"
+log="$work/serve.log"
+"$bin" serve "$scene" --listen 127.0.0.1:0 --cache-mb 256 >"$log" 2>&1 &
+server_pid=$!
+trap 'kill -TERM "$server_pid" 2>/dev/null || true' EXIT
+address=""
+for _ in $(seq 1 600); do
+  address=$(sed -n 's/.*listening on \([0-9.]*:[0-9]*\).*/\1/p' "$log" | head -n 1)
+  [ -n "$address" ] && break
+  kill -0 "$server_pid" 2>/dev/null || { cat "$log"; echo "outcore serve exited early" >&2; exit 1; }
+  sleep 0.1
+done
+[ -n "$address" ] || { cat "$log"; echo "outcore serve did not start" >&2; exit 1; }
+echo "serving $scene on $address"
 echo
-echo "== a few hits ($work/hits.npy)"
-.venv/bin/python - "$work/hits.npy" <<'PY'
+echo "== outcore query (1 M camera rays over gRPC, C++ client)"
+"$bin" query --server "$address" --rays "$work/camera.npy" -o "$work/hits.npy" --stats
+echo
+echo "== outcore.SceneClient (the same rays from Python)"
+.venv/bin/python - "$address" "$work/camera.npy" "$work/hits.npy" <<'PY'
 import sys
+import time
 import numpy as np
-hits = np.load(sys.argv[1])
-hit = np.flatnonzero(hits["primitive_id"] != 0xFFFFFFFF)
-print(f"{hit.size} of {hits.size} rays hit")
+import outcore
+
+address, rays_path, cli_hits_path = sys.argv[1:]
+rays = np.load(rays_path)
+with outcore.SceneClient(address, timeout=600) as scene:
+    t0 = time.perf_counter()
+    ans = scene.cast_rays(rays)
+    seconds = time.perf_counter() - t0
+    occluded = scene.test_occlusions(rays[:100000])
+    stats = scene.stats()
+hit = np.flatnonzero(np.isfinite(ans["t_hit"]))
+print(f"cast_rays: {rays.shape[0]} rays in {seconds:.2f} s ({rays.shape[0] / seconds / 1e6:.2f} M rays/s), "
+      f"{hit.size} hit; test_occlusions on 100000: {int(occluded.sum())} occluded")
 for i in hit[:: max(1, hit.size // 5)][:5]:
-    h = hits[i]
-    print(f"ray {i}: t={h['t_hit']:.4f} geometry {h['geometry_id']} primitive {h['primitive_id']} "
-          f"u={h['u']:.3f} v={h['v']:.3f} ng={np.round(h['ng'], 3)}")
+    print(f"ray {i}: t={ans['t_hit'][i]:.4f} geometry {ans['geometry_ids'][i]} primitive {ans['primitive_ids'][i]} "
+          f"uv={np.round(ans['primitive_uvs'][i], 3)} ng={np.round(ans['primitive_normals'][i], 3)}")
+cli = np.load(cli_hits_path)
+same = (np.array_equal(cli["primitive_id"], ans["primitive_ids"]) and
+        np.array_equal(cli["t_hit"].view(np.uint32), ans["t_hit"].view(np.uint32)))
+print("Python answers equal the CLI's bitwise:", same)
+print("server cache figures: " + ", ".join(
+    f"{k}={stats[k]}" for k in ("brick_builds", "cache_hits", "cache_misses", "evictions",
+                                "resident_bytes", "peak_resident_bytes", "cache_budget_bytes",
+                                "eviction_policy")))
+if not same:
+    sys.exit("the Python and CLI answers differ")
 PY
+echo
+echo "== stopping the server (SIGTERM: drains, exits 0)"
+kill -TERM "$server_pid"
+wait "$server_pid"
+trap - EXIT
+tail -n 3 "$log"
+echo
+echo "== outcore trace (in process, the same rays; answers must equal the server's)"
+"$bin" trace "$scene" --rays "$work/camera.npy" -o "$work/hits_trace.npy" --cache-mb 256 --stats
+cmp "$work/hits.npy" "$work/hits_trace.npy" && echo "trace and query answers are bitwise identical"

@@ -10,6 +10,7 @@
 #include "core/cli/commands.h"
 #include "core/io/npy.h"
 #include "core/query/query_engine.h"
+#include "core/query/spawn_origin.h"
 
 namespace outcore {
 
@@ -33,6 +34,8 @@ struct TraceArgs {
   bool strict = false;
   int repeat = 1;
   std::string trace_out;
+  std::string spawn_out;
+  std::string spawn_side = "front";
 };
 
 Expected<BrickAccelOptions> parse_accel_options(const std::vector<std::string>& items) {
@@ -84,6 +87,9 @@ int run_trace(const TraceArgs& args) {
     }
     engine_options.brick_accel = "reference";
   }
+  if (!args.spawn_out.empty() && args.any_hit) {
+    return report_command_error("trace", "--spawn-out needs closest hits: drop --any-hit");
+  }
   if (!args.trace_out.empty()) {
     auto trace = AccessTraceWriter::create(args.trace_out,
                                            "outcore trace " + args.scene + " --rays " + args.rays_path);
@@ -123,6 +129,13 @@ int run_trace(const TraceArgs& args) {
   const Status written =
       args.any_hit ? write_bools_npy(args.output_path, occluded) : write_hits_npy(args.output_path, hits);
   if (!written.ok()) return report_command_error("trace", written.message());
+  if (!args.spawn_out.empty()) {
+    const SpawnSide side = args.spawn_side == "back" ? SpawnSide::kBack : SpawnSide::kFront;
+    std::vector<Vec3f> origins(hits.size());
+    for (std::size_t i = 0; i < hits.size(); ++i) origins[i] = spawn_origin((*rays)[i], hits[i], side);
+    const Status spawned = write_points_npy(args.spawn_out, origins);
+    if (!spawned.ok()) return report_command_error("trace", spawned.message());
+  }
   if (!args.stats_json_path.empty()) {
     std::ofstream out(args.stats_json_path);
     if (runs.size() == 1) {
@@ -162,6 +175,13 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--repeat", args->repeat, "Run the batch this many times (first cold, then warm)")
       ->capture_default_str();
   cmd->add_option("--trace-out", args->trace_out, "Record every brick request to this CSV (for cache-sim)");
+  cmd->add_option("--spawn-out", args->spawn_out,
+                  "Also write (N,3) float32 origins for secondary rays from each hit (NaN on a miss), "
+                  "offset off the surface (docs/ACCURACY.md)");
+  cmd->add_option("--spawn-side", args->spawn_side,
+                  "Side of the surface for --spawn-out: front (where the ray came from) or back")
+      ->check(CLI::IsMember({"front", "back"}))
+      ->capture_default_str();
   cmd->add_flag("--strict", args->strict, "Invalid rays are an error naming the first one (default: misses)");
   cmd->callback([args, &exit_code] { exit_code = run_trace(*args); });
 }

@@ -30,7 +30,8 @@ std::string strip_spaces(std::string_view s) {
 Expected<std::string_view> dict_value(std::string_view dict, std::string_view key, const std::string& name) {
   const std::string quoted = "'" + std::string(key) + "'";
   auto pos = dict.find(quoted);
-  if (pos == std::string_view::npos) return invalid_argument(name + ": .npy header has no '" + std::string(key) + "'");
+  if (pos == std::string_view::npos)
+    return invalid_argument(name + ": .npy header has no '" + std::string(key) + "'");
   pos = dict.find(':', pos + quoted.size());
   if (pos == std::string_view::npos) return invalid_argument(name + ": malformed .npy header");
   ++pos;
@@ -102,8 +103,8 @@ Expected<std::string> read_whole_file(const std::string& path) {
 }
 
 // Checks shape, dtype and size; returns the data bytes.
-Expected<std::string_view> array_data(std::string_view bytes, const std::string& name, const NpyHeader& header,
-                                      uint64_t record_bytes) {
+Expected<std::string_view> array_data(std::string_view bytes, const std::string& name,
+                                      const NpyHeader& header, uint64_t record_bytes) {
   uint64_t want = record_bytes;
   for (uint64_t d : header.shape) {
     if (d != 0 && want > std::numeric_limits<uint64_t>::max() / d) {
@@ -113,12 +114,12 @@ Expected<std::string_view> array_data(std::string_view bytes, const std::string&
   }
   const uint64_t have = bytes.size() - header.data_offset;
   if (have < want) {
-    return data_loss(name + " is truncated: shape " + shape_text(header.shape) + " needs " + std::to_string(want) +
-                     " bytes of data, the file has " + std::to_string(have));
+    return data_loss(name + " is truncated: shape " + shape_text(header.shape) + " needs " +
+                     std::to_string(want) + " bytes of data, the file has " + std::to_string(have));
   }
   if (have > want) {
-    return invalid_argument(name + " has " + std::to_string(have - want) + " bytes after the array data (shape " +
-                            shape_text(header.shape) + ")");
+    return invalid_argument(name + " has " + std::to_string(have - want) +
+                            " bytes after the array data (shape " + shape_text(header.shape) + ")");
   }
   return bytes.substr(header.data_offset, want);
 }
@@ -134,11 +135,13 @@ Expected<NpyHeader> parse_npy_header(std::string_view bytes, const std::string& 
   uint64_t header_len = 0;
   std::size_t prefix = 0;
   if (major == 1) {
-    header_len = static_cast<uint8_t>(bytes[8]) | (static_cast<uint64_t>(static_cast<uint8_t>(bytes[9])) << 8);
+    header_len =
+        static_cast<uint8_t>(bytes[8]) | (static_cast<uint64_t>(static_cast<uint8_t>(bytes[9])) << 8);
     prefix = 10;
   } else if (major == 2 || major == 3) {
     if (bytes.size() < 12) return data_loss(name + " is truncated inside its .npy header");
-    for (int i = 0; i < 4; ++i) header_len |= static_cast<uint64_t>(static_cast<uint8_t>(bytes[8 + i])) << (8 * i);
+    for (int i = 0; i < 4; ++i)
+      header_len |= static_cast<uint64_t>(static_cast<uint8_t>(bytes[8 + i])) << (8 * i);
     prefix = 12;
   } else {
     return invalid_argument(name + ": unsupported .npy format version " + std::to_string(major));
@@ -151,7 +154,8 @@ Expected<NpyHeader> parse_npy_header(std::string_view bytes, const std::string& 
   header.descr = std::string(descr);
   OUTCORE_ASSIGN_OR_RETURN(auto fortran, dict_value(dict, "fortran_order", name));
   const std::string fortran_text = strip_spaces(fortran);
-  if (fortran_text != "True" && fortran_text != "False") return invalid_argument(name + ": malformed fortran_order");
+  if (fortran_text != "True" && fortran_text != "False")
+    return invalid_argument(name + ": malformed fortran_order");
   header.fortran_order = fortran_text == "True";
   OUTCORE_ASSIGN_OR_RETURN(auto shape, dict_value(dict, "shape", name));
   const std::string shape_clean = strip_spaces(shape);
@@ -231,6 +235,11 @@ Expected<std::vector<Hit>> read_hits_npy(const std::string& path) {
 
 Status write_bools_npy(const std::string& path, std::span<const uint8_t> flags) {
   return write_file(path, make_header("|b1", {flags.size()}), flags.data(), flags.size());
+}
+
+Status write_points_npy(const std::string& path, std::span<const Vec3f> points) {
+  static_assert(sizeof(Vec3f) == 12);
+  return write_file(path, make_header("<f4", {points.size(), 3}), points.data(), points.size_bytes());
 }
 
 Expected<std::vector<uint8_t>> read_bools_npy(const std::string& path) {

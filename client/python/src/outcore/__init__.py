@@ -6,12 +6,14 @@ with Open3D RaycastingScene-style results.
         ans = scene.cast_rays(rays)          # rays: (..., 6) or (..., 8) float32
         ans["t_hit"], ans["primitive_ids"]   # Open3D's keys; misses: inf, INVALID_ID
         hit = scene.test_occlusions(rays)    # (...,) bool
+        o = outcore.spawn_origins(rays, ans) # (..., 3) origins for secondary rays
 
 See docs/PYTHON.md in the repository.
 """
 
 from .client import INVALID_ID, SceneClient
 from .errors import OutcoreError
+from .spawn import spawn_origins
 
-__all__ = ["SceneClient", "OutcoreError", "INVALID_ID"]
+__all__ = ["SceneClient", "OutcoreError", "INVALID_ID", "spawn_origins"]
 __version__ = "0.1.0"
