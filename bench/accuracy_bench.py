@@ -98,6 +98,7 @@ def open3d_scene(tris):
 def open3d_cast(scene, rays, ids, runs):
     import open3d as o3d
     rays_t = o3d.core.Tensor(rays)
+    scene.cast_rays(rays_t[:1], nthreads=2)  # Open3D builds its BVH on the first call
     times, result = [], None
     for _ in range(runs):
         t0 = time.perf_counter()

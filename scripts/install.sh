@@ -68,5 +68,10 @@ if [ "${1:-}" = "--bench" ]; then
     .venv-bench/bin/pip install -q -r scripts/requirements-bench.txt
     echo "$bench_want" > "$bench_stamp"
   fi
+  # The remote benchmark drives the Python client from this venv too.
+  if [ "$(cat .venv-bench/.outcore-client.sha 2>/dev/null)" != "$client_want" ]; then
+    .venv-bench/bin/pip install -q ./client/python
+    echo "$client_want" > .venv-bench/.outcore-client.sha
+  fi
 fi
 echo "[install] ok"

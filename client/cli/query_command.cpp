@@ -1,6 +1,8 @@
 #include "client/cli/query_command.h"
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -24,6 +26,7 @@ struct QueryArgs {
   bool no_reorder = false;
   uint64_t chunk_rays = 0;
   bool print_stats = false;
+  int repeat = 1;
 };
 
 int run_query(const QueryArgs& args) {
@@ -44,14 +47,22 @@ int run_query(const QueryArgs& args) {
   client::CallStats stats;
   Status status;
   Status written;
-  if (args.any_hit) {
-    std::vector<uint8_t> occluded(rays->size());
-    status = scene.occluded(*rays, occluded, options, &stats);
-    if (status.ok()) written = write_bools_npy(args.output_path, occluded);
-  } else {
-    std::vector<Hit> hits(rays->size());
-    status = scene.intersect(*rays, hits, options, &stats);
-    if (status.ok()) written = write_hits_npy(args.output_path, hits);
+  std::vector<uint8_t> occluded(args.any_hit ? rays->size() : 0);
+  std::vector<Hit> hits(args.any_hit ? 0 : rays->size());
+  // Repeats send the same batch again (for benchmarks: the wall time of each
+  // whole call, client chunking and wire included, file I/O excluded); the
+  // output and --stats are the last call's.
+  for (int r = 0; r < std::max(1, args.repeat) && status.ok(); ++r) {
+    stats = client::CallStats{};
+    const auto start = std::chrono::steady_clock::now();
+    status = args.any_hit ? scene.occluded(*rays, occluded, options, &stats)
+                          : scene.intersect(*rays, hits, options, &stats);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (args.repeat > 1 && status.ok()) std::printf("call %d/%d seconds %.6f\n", r + 1, args.repeat, seconds);
+  }
+  if (status.ok()) {
+    written =
+        args.any_hit ? write_bools_npy(args.output_path, occluded) : write_hits_npy(args.output_path, hits);
   }
   if (!status.ok()) return report_command_error("query", status.message());
   if (!written.ok()) return report_command_error("query", written.message());
@@ -87,6 +98,10 @@ void add_query_command(CLI::App& app, int& exit_code) {
       "Rays per message (default: as many as the server's max message size allows); larger batches "
       "are streamed");
   cmd->add_flag("--stats", args->print_stats, "Print the engine's figures summed over the replies");
+  cmd->add_option("--repeat", args->repeat,
+                  "Send the batch this many times, printing each call's wall seconds")
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
   cmd->callback([args, &exit_code] { exit_code = run_query(*args); });
 }
 
