@@ -29,7 +29,9 @@ class BufferedFileWriter {
 
   // Creates a new file (fails if it exists) with a buffer of buffer_bytes.
   // With asynchronous, a second buffer is filled while a background thread
-  // writes the first, so the kernel's copy overlaps the caller's work.
+  // writes the first, so the kernel's copy overlaps the caller's work; the
+  // background thread also streams the data to the disk as it goes (see
+  // background_loop), for files written once and not read back soon.
   Status create(const std::string& path, std::size_t buffer_bytes, bool asynchronous = false);
   Status append(const void* data, std::size_t bytes);
   // Appends zero bytes up to the next multiple of alignment.
@@ -46,6 +48,7 @@ class BufferedFileWriter {
   Status flush_buffer();
   Status wait_for_background_write();
   void background_loop();
+  void stream_to_disk(std::size_t bytes);
 
   std::string path_;
   int fd_ = -1;
@@ -62,6 +65,10 @@ class BufferedFileWriter {
   bool has_work_ = false;
   bool stopping_ = false;
   Status background_status_;
+  // Writeback window of the background thread: [streamed_, background_offset_)
+  // has been handed to the kernel for writing but not yet waited for.
+  uint64_t background_offset_ = 0;
+  uint64_t streamed_ = 0;
 };
 
 // Reads path sequentially in chunks of at most chunk_bytes (a multiple of
