@@ -246,10 +246,11 @@ def draw(rows, path):
               ("wrong_rate", "disagreement with float64 on incoherent rays")]
     for ax, (key, title) in zip(axes, panels):
         pts = [(r["Mrays_geomean"], max(r[key], floor), r["config"]) for r in rows]
-        for x, y, name in pts:
+        for i, (x, y, name) in enumerate(pts):
             marker = "s" if name == "open3d" else "o"
             ax.scatter([x], [y], marker=marker, s=50)
-            ax.annotate(name, (x, y), textcoords="offset points", xytext=(5, 5), fontsize=8)
+            # Staggered labels: several configurations share the zero line.
+            ax.annotate(name, (x, y), textcoords="offset points", xytext=(5, 5 + 11 * (i % 3)), fontsize=8)
         # Pareto front: faster and with less error is better.
         front, best = [], float("inf")
         for x, y, _ in sorted(pts, key=lambda p: -p[0]):
