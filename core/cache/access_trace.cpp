@@ -80,6 +80,11 @@ void AccessTraceWriter::write_header_locked() {
 void AccessTraceWriter::write_locked(const std::vector<AccessRecord>& chunk) {
   write_header_locked();
   for (const AccessRecord& r : chunk) {
+    if (r.has_hint) {
+      std::fputs("# hint:", file_);
+      for (const uint32_t b : r.hint) std::fprintf(file_, " %u", b);
+      std::fputc('\n', file_);
+    }
     std::fprintf(file_, "%llu,%u,%llu,%llu,%.17g,%s\n", static_cast<unsigned long long>(r.seq), r.brick,
                  static_cast<unsigned long long>(r.bytes), static_cast<unsigned long long>(r.reserved_bytes),
                  r.build_seconds, access_outcome_name(r.outcome));
@@ -121,12 +126,19 @@ uint64_t AccessTraceWriter::records_written() const {
   return written_;
 }
 
+namespace {
+// Brick ids allowed in a hint of a trace without a "bricks" line.
+constexpr uint32_t kMaxUnlabelledBrickId = uint32_t{1} << 26;
+}  // namespace
+
 Expected<AccessTrace> read_access_trace(const std::string& path) {
   TextLineReader reader;
   OUTCORE_RETURN_IF_ERROR(reader.open(path));
   AccessTrace trace;
   std::string_view line;
   bool saw_version = false, saw_columns = false;
+  bool has_pending_hint = false;
+  std::vector<uint32_t> pending_hint;
   const auto where = [&] { return path + ":" + std::to_string(reader.line_number()) + ": "; };
   while (reader.next_line(line)) {
     line = trim(line);
@@ -150,6 +162,25 @@ Expected<AccessTrace> read_access_trace(const std::string& path) {
       if (colon == std::string_view::npos) continue;  // a free comment
       const std::string_view key = trim(body.substr(0, colon));
       const std::string_view value = trim(body.substr(colon + 1));
+      if (key == "hint") {
+        pending_hint.clear();
+        has_pending_hint = true;
+        for (std::string_view rest = value; !rest.empty();) {
+          const auto space = rest.find(' ');
+          const std::string_view item = rest.substr(0, space);
+          uint32_t brick = 0;
+          if (!parse_unsigned(item, brick))
+            return invalid_argument(where() + "bad brick id '" + std::string(item) + "' in a hint");
+          // Policies index arrays by brick id: an absurd id must not allocate.
+          const uint32_t limit = trace.info.bricks != 0 ? trace.info.bricks : kMaxUnlabelledBrickId;
+          if (brick >= limit)
+            return invalid_argument(where() + "brick " + std::to_string(brick) +
+                                    " in a hint is beyond the trace's " + std::to_string(limit) + " bricks");
+          pending_hint.push_back(brick);
+          rest = space == std::string_view::npos ? std::string_view{} : trim(rest.substr(space + 1));
+        }
+        continue;
+      }
       if (key == "policy") trace.info.policy = value;
       if (key == "builder") trace.info.builder = value;
       if (key == "source") trace.info.source = value;
@@ -206,7 +237,13 @@ Expected<AccessTrace> read_access_trace(const std::string& path) {
     if (trace.info.bricks != 0 && r.brick >= trace.info.bricks)
       return invalid_argument(where() + "brick " + std::to_string(r.brick) + " is beyond the trace's " +
                               std::to_string(trace.info.bricks) + " bricks");
-    trace.records.push_back(r);
+    if (has_pending_hint) {
+      r.has_hint = true;
+      r.hint = std::move(pending_hint);
+      pending_hint = {};
+      has_pending_hint = false;
+    }
+    trace.records.push_back(std::move(r));
   }
   OUTCORE_RETURN_IF_ERROR(reader.status());
   if (!saw_version) return invalid_argument(path + ": empty file, not an outcore access trace");

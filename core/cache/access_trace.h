@@ -23,7 +23,10 @@
 // with 17 significant digits so a replay feeds GDSF the very same cost.
 // outcome: miss (this request built the brick), hit (it was ready), wait (it
 // was being built by another thread and this request waited for that build).
-// Failed acquisitions are not recorded.
+// Failed acquisitions are not recorded. A line "# hint: 12 7 40" (brick ids,
+// soonest first; possibly none) before a record is the schedule hint the
+// engine gave the policy before that request (schedule-aware policies use
+// it); being a comment line, CSV readers skip it.
 //
 // Thread-safety: AccessTraceWriter::append/close may be called from any thread
 // (one mutex, never taken under the cache's lock); the reader is a function.
@@ -51,6 +54,11 @@ struct AccessRecord {
   uint64_t reserved_bytes = 0;
   double build_seconds = 0;
   AccessOutcome outcome = AccessOutcome::kHit;
+  // The schedule hint the cache's policy was given just before this request
+  // (EvictionPolicy::on_schedule_hint), when there was one since the last
+  // request; a replay hands it to the policy at the same point.
+  bool has_hint = false;
+  std::vector<uint32_t> hint;
 };
 
 // The metadata lines; empty or zero when a trace does not give them.

@@ -21,6 +21,12 @@ std::vector<AccessRecord> records(uint64_t first, uint64_t count) {
     r.reserved_bytes = 2000 + s;
     r.build_seconds = s % 3 == 0 ? 0.1 + 1e-9 * static_cast<double>(s) : 0.0;
     r.outcome = s % 3 == 0 ? AccessOutcome::kMiss : (s % 3 == 1 ? AccessOutcome::kHit : AccessOutcome::kWait);
+    // Schedule hints on some records: one of three bricks, one empty.
+    if (s % 5 == 2) {
+      r.has_hint = true;
+      r.hint = {static_cast<uint32_t>(s % 7), 6, 0};
+    }
+    if (s % 5 == 4) r.has_hint = true;
     out.push_back(r);
   }
   return out;
@@ -59,6 +65,8 @@ TEST(AccessTraceTest, RoundTripsExactlyAndOrdersChunksBySeq) {
     EXPECT_EQ(trace->records[i].reserved_bytes, expected[i].reserved_bytes);
     EXPECT_EQ(trace->records[i].build_seconds, expected[i].build_seconds) << "must round-trip bit for bit";
     EXPECT_EQ(trace->records[i].outcome, expected[i].outcome);
+    EXPECT_EQ(trace->records[i].has_hint, expected[i].has_hint) << i;
+    EXPECT_EQ(trace->records[i].hint, expected[i].hint) << i;
   }
 }
 
@@ -100,6 +108,11 @@ TEST(AccessTraceTest, MalformedFilesAreErrorsNamingFileAndLine) {
       {"# outcore brick access trace, version 1\n# bricks: 4\n"
        "seq,brick,bytes,reserved_bytes,build_seconds,outcome\n0,4,1,1,0,miss\n",
        ":4: brick 4 is beyond the trace's 4 bricks"},
+      {header + "# hint: 1 y 2\n0,1,100,100,0,miss\n", ":3: bad brick id 'y' in a hint"},
+      {"# outcore brick access trace, version 1\n# bricks: 4\n"
+       "seq,brick,bytes,reserved_bytes,build_seconds,outcome\n# hint: 0 9\n0,1,1,1,0,miss\n",
+       ":4: brick 9 in a hint is beyond the trace's 4 bricks"},
+      {header + "# hint: 4000000000\n", ":3: brick 4000000000 in a hint is beyond"},
   };
   for (const Case& c : cases) {
     const std::string path = dir.file("bad.csv");

@@ -286,7 +286,19 @@ std::vector<AccessRecord> BrickCache::record_access(uint32_t brick, uint64_t byt
   // touched once per kChunk acquisitions, never under the cache's lock.
   constexpr std::size_t kChunk = 4096;
   if (trace_buffer_.capacity() < kChunk) trace_buffer_.reserve(kChunk);
-  trace_buffer_.push_back({trace_seq_++, brick, bytes, reserved, seconds, outcome});
+  AccessRecord record;
+  record.seq = trace_seq_++;
+  record.brick = brick;
+  record.bytes = bytes;
+  record.reserved_bytes = reserved;
+  record.build_seconds = seconds;
+  record.outcome = outcome;
+  if (has_pending_hint_) {
+    record.has_hint = true;
+    record.hint = std::exchange(pending_hint_, {});
+    has_pending_hint_ = false;
+  }
+  trace_buffer_.push_back(std::move(record));
   if (trace_buffer_.size() < kChunk) return {};
   return std::exchange(trace_buffer_, {});
 }
@@ -315,6 +327,10 @@ void BrickCache::flush_access_trace() {
 void BrickCache::hint_schedule(std::span<const uint32_t> upcoming) {
   std::lock_guard lock(mutex_);
   policy_->on_schedule_hint(upcoming);
+  if (trace_) {
+    pending_hint_.assign(upcoming.begin(), upcoming.end());
+    has_pending_hint_ = true;
+  }
 }
 
 bool BrickCache::is_resident(uint32_t brick_id) const {

@@ -152,6 +152,9 @@ class BrickCache {
   std::shared_ptr<AccessTraceWriter> trace_;
   std::vector<AccessRecord> trace_buffer_;
   uint64_t trace_seq_ = 0;
+  // The last schedule hint, recorded with the next acquisition (traced only).
+  bool has_pending_hint_ = false;
+  std::vector<uint32_t> pending_hint_;
 };
 
 }  // namespace outcore

@@ -87,6 +87,7 @@ Expected<SimulationResult> simulate_policy(const AccessTrace& trace, const Trace
   };
 
   for (const AccessRecord& r : trace.records) {
+    if (r.has_hint) policy.on_schedule_hint(r.hint);
     ++result.requests;
     if (resident[r.brick]) {
       ++result.hits;

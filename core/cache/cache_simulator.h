@@ -9,6 +9,7 @@
 //   builder's overrun) and policy.on_insert gets the bytes and the cost;
 // - a brick whose reservation exceeds the budget is RESOURCE_EXHAUSTED naming
 //   it (BrickCache refuses it the same way).
+// - a record's schedule hint (if any) goes to policy.on_schedule_hint first.
 // Bytes come from the record being replayed. The cost of a simulated build is
 // the record's own build_seconds when the live cache built there too, else
 // the mean of that brick's measured builds in the trace (0 if it has none).

@@ -1,7 +1,7 @@
 // EvictionPolicy: decides which resident, unpinned brick the cache evicts next.
 // The cache tells the policy its budget once, then about every insert, access
 // and erase; the policy only ranks. Policies are created by name
-// (make_eviction_policy: lru, clock, lfu, arc, s3fifo, gdsf) so `trace`,
+// (make_eviction_policy: lru, clock, lfu, arc, s3fifo, gdsf, schedule) so `trace`,
 // `serve` and `cache-sim` can select them; the simulator drives the very same
 // classes, so a replay ranks exactly as the live cache did.
 //

@@ -9,11 +9,12 @@
 #include "core/cache/lfu_policy.h"
 #include "core/cache/lru_policy.h"
 #include "core/cache/s3fifo_policy.h"
+#include "core/cache/schedule_policy.h"
 
 namespace outcore {
 
 std::vector<std::string> eviction_policy_names() {
-  return {"lru", "clock", "lfu", "arc", "s3fifo", "gdsf"};
+  return {"lru", "clock", "lfu", "arc", "s3fifo", "gdsf", "schedule"};
 }
 
 Expected<std::unique_ptr<EvictionPolicy>> make_eviction_policy(const std::string& name) {
@@ -24,6 +25,7 @@ Expected<std::unique_ptr<EvictionPolicy>> make_eviction_policy(const std::string
   if (name == "arc") policy = std::make_unique<ArcPolicy>();
   if (name == "s3fifo") policy = std::make_unique<S3FifoPolicy>();
   if (name == "gdsf") policy = std::make_unique<GdsfPolicy>();
+  if (name == "schedule") policy = std::make_unique<SchedulePolicy>();
   if (policy) return policy;
   std::string known;
   for (const std::string& n : eviction_policy_names()) known += (known.empty() ? "" : ", ") + n;
