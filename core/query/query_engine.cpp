@@ -398,13 +398,19 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     }
   }
 
-  for (std::size_t i = 0; i < n; ++i) {
-    if constexpr (kKind == QueryKind::kClosestHit) {
-      stats.rays_hit += hits[i].is_hit();
-    } else {
-      stats.rays_hit += occluded[i] != 0;
+  std::vector<uint64_t> chunk_hits(check_chunks, 0);  // counted in parallel, summed in order
+  tbb::parallel_for(std::size_t{0}, check_chunks, [&](std::size_t c) {
+    uint64_t hit = 0;
+    for (std::size_t i = c * kCheckGrain; i < std::min(n, (c + 1) * kCheckGrain); ++i) {
+      if constexpr (kKind == QueryKind::kClosestHit) {
+        hit += hits[i].is_hit();
+      } else {
+        hit += occluded[i] != 0;
+      }
     }
-  }
+    chunk_hits[c] = hit;
+  });
+  for (const uint64_t hit : chunk_hits) stats.rays_hit += hit;
   const CacheCounters counters_after = cache_->counters();
   stats.brick_builds = counters_after.builds - counters_before.builds;
   stats.evictions = counters_after.evictions - counters_before.evictions;

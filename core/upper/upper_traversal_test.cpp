@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <vector>
@@ -82,6 +83,51 @@ TEST(UpperTraversal, FlatLeavesFindTheSameBricksAsTheHierarchy) {
         expect_same_walk<4>(upper, flat, ray);
         expect_same_walk<2>(upper, flat, ray);
         if (HasFatalFailure()) return;
+      }
+    }
+  }
+}
+
+// The simple reference: every leaf's own slab test, no hierarchy.
+template <std::size_t N>
+uint32_t reference_next_bricks(const UpperHierarchy& upper, const SlabRay& ray, float tmin, float tmax,
+                               const BrickKey& after, std::array<BrickKey, N>& window) {
+  uint32_t found = 0;
+  for (const UpperNode& node : upper.nodes) {
+    float entry;
+    if (!node.is_leaf || !detail::slab_test(ray, node.bounds, tmin, tmax, after.entry, entry)) continue;
+    const BrickKey key{entry, node.child_or_brick};
+    if (after < key) detail::insert_key(key, window, found);
+  }
+  return found;
+}
+
+// Front-to-back walks over large hierarchies find, window by window, what
+// testing every leaf finds, also when the horizon shrinks under the walk
+// (a hit found in a brick).
+TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
+  std::mt19937 rng(9);
+  for (const std::size_t n : {9, 40, 300}) {
+    const auto boxes = tricky_boxes(n, rng);
+    const UpperHierarchy upper = build_upper_hierarchy(boxes);
+    for (int r = 0; r < 2000; ++r) {
+      const Ray ray = tricky_ray(rng);
+      const SlabRay slab(ray);
+      BrickKey after;
+      float tmax = ray.tfar;
+      for (int step = 0; step < 400; ++step) {
+        std::array<BrickKey, 4> a{}, b{};
+        uint64_t nodes = 0;
+        const uint32_t found_a = next_bricks(upper, slab, ray.tnear, tmax, after, a, nodes);
+        const uint32_t found_b = reference_next_bricks(upper, slab, ray.tnear, tmax, after, b);
+        ASSERT_EQ(found_a, found_b) << "n " << n << " ray " << r << " step " << step;
+        for (uint32_t k = 0; k < found_a; ++k) {
+          ASSERT_EQ(a[k].brick, b[k].brick);
+          ASSERT_EQ(std::memcmp(&a[k].entry, &b[k].entry, sizeof(float)), 0);
+        }
+        if (found_a < 4) break;
+        after = a[found_a - 1];
+        if (r % 3 == 0 && std::isfinite(a[1].entry)) tmax = std::max(a[1].entry, ray.tnear);  // a hit
       }
     }
   }
