@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -95,7 +96,8 @@ uint32_t reference_next_bricks(const UpperHierarchy& upper, const SlabRay& ray, 
   uint32_t found = 0;
   for (const UpperNode& node : upper.nodes) {
     float entry;
-    if (!node.is_leaf || !detail::slab_test(ray, node.bounds, tmin, tmax, after.entry, entry)) continue;
+    if (!node.is_leaf || !detail::slab_test_scalar(ray, node.bounds, tmin, tmax, after.entry, entry))
+      continue;
     const BrickKey key{entry, node.child_or_brick};
     if (after < key) detail::insert_key(key, window, found);
   }
@@ -128,6 +130,32 @@ TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
         if (found_a < 4) break;
         after = a[found_a - 1];
         if (r % 3 == 0 && std::isfinite(a[1].entry)) tmax = std::max(a[1].entry, ray.tnear);  // a hit
+      }
+    }
+  }
+}
+
+// The SSE slab test against the scalar one: same verdict, bitwise same entry
+// (signed zeros included), over boxes with flat sides and points, rays on slab
+// planes and with zero direction components, and infinite or tiny segments.
+TEST(UpperTraversal, SseSlabTestIsBitwiseTheScalarOne) {
+  std::mt19937 rng(10);
+  std::uniform_real_distribution<float> u(0.0f, 3.0f);
+  for (int scene = 0; scene < 200; ++scene) {
+    const auto boxes = tricky_boxes(8, rng);
+    std::vector<UpperNode> nodes(boxes.size());
+    for (std::size_t k = 0; k < boxes.size(); ++k) nodes[k].bounds = boxes[k], nodes[k].child_or_brick = 5;
+    for (int r = 0; r < 200; ++r) {
+      const Ray ray = tricky_ray(rng);
+      const SlabRay slab(ray);
+      const float tmax = r % 4 == 0 ? std::numeric_limits<float>::infinity() : ray.tnear + u(rng);
+      const float min_exit = r % 5 == 0 ? -std::numeric_limits<float>::infinity() : u(rng);
+      for (const UpperNode& node : nodes) {
+        float a = -1, b = -1;
+        const bool hit_a = detail::slab_test(slab, node.bounds, ray.tnear, tmax, min_exit, a);
+        const bool hit_b = detail::slab_test_scalar(slab, node.bounds, ray.tnear, tmax, min_exit, b);
+        ASSERT_EQ(hit_a, hit_b);
+        ASSERT_EQ(std::memcmp(&a, &b, sizeof(float)), 0) << a << " vs " << b;
       }
     }
   }
