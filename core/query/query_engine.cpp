@@ -139,10 +139,13 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   if (scratch->progress.size() < n) scratch->progress.resize(n);
   std::vector<uint8_t>& valid = scratch->valid;
   std::vector<RayProgress>& progress = scratch->progress;
-  // A hierarchy of a few bricks is traversed flat: all leaf boxes tested at
-  // once, same answers (upper_traversal.h).
+  // A hierarchy of a few bricks is traversed flat (all leaf boxes tested at
+  // once), a larger one 4-wide: same bricks, same keys, fewer branches
+  // (upper_traversal.h).
   FlatLeaves flat;
   const bool use_flat = make_flat_leaves(upper, flat);
+  WideUpper wide;
+  if (!use_flat) make_wide_upper(upper, wide);
 
   // Validation and reset of the outputs and per-ray progress, in parallel
   // chunks; the first bad ray of each chunk is kept so that strict mode names
@@ -207,7 +210,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     const SlabRay slab_ray(rays[i]);
     p.count = static_cast<uint8_t>(
         use_flat ? next_bricks_flat(flat, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes)
-                 : next_bricks(upper, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes));
+                 : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes));
     p.complete = p.count < kWindow;
     p.next = 0;
     if (p.count == 0) return kInvalidId;

@@ -109,23 +109,32 @@ uint32_t reference_next_bricks(const UpperHierarchy& upper, const SlabRay& ray, 
 // (a hit found in a brick).
 TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
   std::mt19937 rng(9);
-  for (const std::size_t n : {9, 40, 300}) {
+  for (const std::size_t n : {1, 2, 5, 9, 40, 300}) {
     const auto boxes = tricky_boxes(n, rng);
     const UpperHierarchy upper = build_upper_hierarchy(boxes);
+    WideUpper wide;
+    make_wide_upper(upper, wide);
+    if (n >= 9) {
+      EXPECT_LT(wide.nodes.size(), upper.nodes.size() / 2);
+    }
     for (int r = 0; r < 2000; ++r) {
       const Ray ray = tricky_ray(rng);
       const SlabRay slab(ray);
       BrickKey after;
       float tmax = ray.tfar;
       for (int step = 0; step < 400; ++step) {
-        std::array<BrickKey, 4> a{}, b{};
+        std::array<BrickKey, 4> a{}, b{}, c{};
         uint64_t nodes = 0;
         const uint32_t found_a = next_bricks(upper, slab, ray.tnear, tmax, after, a, nodes);
         const uint32_t found_b = reference_next_bricks(upper, slab, ray.tnear, tmax, after, b);
+        const uint32_t found_c = next_bricks_wide(wide, slab, ray.tnear, tmax, after, c, nodes);
         ASSERT_EQ(found_a, found_b) << "n " << n << " ray " << r << " step " << step;
+        ASSERT_EQ(found_c, found_b) << "wide: n " << n << " ray " << r << " step " << step;
         for (uint32_t k = 0; k < found_a; ++k) {
           ASSERT_EQ(a[k].brick, b[k].brick);
           ASSERT_EQ(std::memcmp(&a[k].entry, &b[k].entry, sizeof(float)), 0);
+          ASSERT_EQ(c[k].brick, b[k].brick);
+          ASSERT_EQ(std::memcmp(&c[k].entry, &b[k].entry, sizeof(float)), 0);
         }
         if (found_a < 4) break;
         after = a[found_a - 1];
