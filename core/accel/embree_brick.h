@@ -157,6 +157,9 @@ class EmbreeBrickAccel final : public BrickAccel {
   void write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
                   std::size_t begin, std::size_t end, Hit* hits) const;
   // The brick triangle behind Embree's primID, and its user id as one key.
+  // Largest per-axis spread of unit directions a coherent run may have, for
+  // rays from about `origin` (see kCoherentAngularFraction).
+  float direction_spread_limit(const Vec3f& origin) const;
   uint32_t triangle_of(uint32_t prim) const { return prim_is_triangle_ ? prim : indices_[3 * prim] / 3; }
   uint64_t key_of(uint32_t prim) const;
 
@@ -176,6 +179,7 @@ class EmbreeBrickAccel final : public BrickAccel {
   std::vector<uint32_t> indices_;  // Embree's index buffer; capacity > size
   bool prim_is_triangle_ = true;   // no degenerate left out: primID == k
   float max_extent_ = 0;           // largest side of the brick's bounds (coherence test)
+  Vec3f center_;                   // centre of the brick's bounds (coherence test)
   uint64_t embree_bytes_ = 0;
   uint64_t build_peak_bytes_ = 0;
   double build_seconds_ = 0;
