@@ -25,17 +25,22 @@ RTCBuildQuality rtc_quality(EmbreeQuality quality) {
 }
 
 constexpr float kInfinity = std::numeric_limits<float>::infinity();
+constexpr uint32_t kNoPrim = 0xffffffffu;
 
 // A little beyond t (2^-18 relative, about 32 float ulps). Embree accepts a
 // candidate when T <= |den| * tfar on rescaled values and reports t = T *
-// rcp(|den|), so a triangle at exactly the ray's best t from another brick (a
-// duplicate, a shared edge) can fail a tfar of exactly t (one ray in twenty
-// in the tests). Tracing up to widen(t) lets Embree report it, and
-// hit_is_better() then settles the tie by ids (or rejects a t beyond the
-// best).
+// rcp(|den|), so a triangle at exactly the best t (a duplicate of the best,
+// here or in another brick) can fail a tfar of exactly t (one ray in twenty
+// in the tests; a margin of 1 ulp already sufficed there); and a node that
+// holds it could be culled by an ulp. Tracing up to widen(t) lets every such
+// candidate reach the tie filter, which rejects whatever is beyond t.
 inline float widen(float t) {
   constexpr float kMargin = 0x1p-18f;
   return t + std::fabs(t) * kMargin;
+}
+
+inline uint64_t id_key(uint32_t geometry_id, uint32_t primitive_id) {
+  return (uint64_t{geometry_id} << 32) | primitive_id;
 }
 
 inline void fill_ray(const Ray& ray, float tfar, RTCRay& out) {
@@ -60,7 +65,8 @@ Vec3f unit_normal(const Triangle& tri) {
   return Vec3f(n / len);  // len > 0: degenerate triangles are not in the scene
 }
 
-// Rays go to Embree in chunks of kChunk (in the order given). A chunk whose
+// Rays go to Embree in chunks of kChunk (in the order given), each cut into
+// runs of kRun consecutive rays. A run whose
 // rays share a direction octant, whose unit directions lie within
 // kCoherentDirectionSpread of each other (per axis, about 6 degrees) and whose
 // origins lie within kCoherentOriginSpread of the brick's size — camera,
@@ -68,13 +74,22 @@ Vec3f unit_normal(const Triangle& tri) {
 // RTC_INTERSECT_CONTEXT_FLAG_COHERENT (rtcIntersect1M / rtcOccluded1M), which
 // Embree traverses as packets: measured 1.5-2x faster for 1024^2 camera rays
 // on the bunny, but 3x slower than rtcIntersect1 for incoherent rays, hence
-// the test. Any other chunk goes through rtcIntersect1 / rtcOccluded1 ray by
-// ray. Both paths give bitwise identical t, u, v and the same triangle
-// (checked by the tests, duplicates included), so the answer does not depend
+// the test. Any other run goes through rtcIntersect1 / rtcOccluded1 ray by
+// ray. (Runs, not whole chunks: 256 consecutive pixels of a row-major
+// 1000-pixel-wide image span 13 degrees and fail the test; 64 span 3.) Both paths give bitwise identical t,
+// u, v (checked by the tests), and ties are settled by the tie filter in both, so the answer does not depend
 // on which path a ray took, i.e. on the batch it came in.
 constexpr std::size_t kChunk = 256;
+constexpr std::size_t kRun = 64;
 constexpr std::size_t kCoherentMinRays = 16;
 constexpr float kCoherentDirectionSpread = 0.1f;
+// ... and within this fraction of the angle the brick subtends from the
+// run's first origin: a run of camera rays that sweeps across a brick small
+// on screen (a sphere of the city seen from afar) is no packet to Embree —
+// measured 1.5x slower as a stream than ray by ray on the city's camera rays,
+// while on the bunny, whose bricks fill the view, streams are 1.4x faster
+// (fractions 0.25 and 0.5 cost the bunny 5-10%, 1 nothing).
+constexpr float kCoherentAngularFraction = 1.0f;
 constexpr float kCoherentOriginSpread = 0.1f;
 
 class ChunkCoherence {
@@ -96,10 +111,10 @@ class ChunkCoherence {
       origin_hi_[a] = std::max(origin_hi_[a], ray.origin[a]);
     }
   }
-  bool coherent(float brick_size) const {
+  bool coherent(float brick_size, float direction_spread) const {
     if (count_ < kCoherentMinRays || octant_or_ != octant_and_) return false;
     for (int a = 0; a < 3; ++a) {
-      if (!(dir_hi_[a] - dir_lo_[a] <= kCoherentDirectionSpread)) return false;
+      if (!(dir_hi_[a] - dir_lo_[a] <= direction_spread)) return false;
       if (!(origin_hi_[a] - origin_lo_[a] <= kCoherentOriginSpread * brick_size)) return false;
     }
     return true;
@@ -114,6 +129,13 @@ class ChunkCoherence {
 };
 
 }  // namespace
+
+float EmbreeBrickAccel::direction_spread_limit(const Vec3f& origin) const {
+  const Vec3f offset = origin - center_;
+  const float distance = std::sqrt(dot(offset, offset));
+  const float subtended = distance > 0 ? max_extent_ / distance : kCoherentDirectionSpread;
+  return std::min(kCoherentDirectionSpread, kCoherentAngularFraction * subtended);
+}
 
 Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& brick,
                                                                     const EmbreeBrickConfig& config) {
@@ -173,6 +195,7 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
   for (const Triangle& tri : accel->triangles_) bounds.extend(tri.bounds());
   const Vec3f extent = bounds.extent();
   accel->max_extent_ = n > 0 ? std::max({extent.x, extent.y, extent.z}) : 0.0f;
+  accel->center_ = n > 0 ? bounds.center() : Vec3f();
 
   if (kept > 0) {
     EmbreeDevice::ExclusiveSection section(*device);
@@ -187,6 +210,8 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
                                  accel->triangles_.data(), 0, sizeof(Vec3f), 3 * n);
       rtcSetSharedGeometryBuffer(geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, accel->indices_.data(),
                                  0, 3 * sizeof(uint32_t), kept);
+      rtcSetGeometryUserData(geometry, accel.get());
+      rtcSetGeometryIntersectFilterFunction(geometry, &EmbreeBrickAccel::tie_filter);
       rtcCommitGeometry(geometry);
       rtcAttachGeometryByID(scene, geometry, 0);
       rtcReleaseGeometry(geometry);
@@ -257,51 +282,114 @@ uint64_t EmbreeBrickAccel::reserve_bytes(uint64_t triangle_count, const EmbreeBr
   return kBase + triangle_count * (spatial_splits ? 280 : 248);
 }
 
-// No intersection filter: Embree's closest hit inside the brick is taken as
-// is (a filter callback on every candidate cost about a third of the trace
-// time). Whatever Embree reports replaces the ray's hit only when
-// hit_is_better() says so, which settles ties with hits from other bricks
-// (and rejects a t that Embree's rescaled tfar test let past by an ulp).
+// The best hit of one ray while it is traced through this brick: t, and who
+// holds it — an Embree primID of this brick, or (prim == kNoPrim) the hit the
+// ray brought from other bricks, by its user key.
+struct EmbreeBrickAccel::TieRecord {
+  float t;
+  uint32_t prim;
+  uint64_t key;
+};
+
+// Embree hands the filter this pointer as it was given to rtcIntersect*.
+struct EmbreeBrickAccel::TieContext {
+  RTCIntersectContext rtc;  // first member
+  TieRecord* records;       // indexed by RTCRay::id
+};
+
+uint64_t EmbreeBrickAccel::key_of(uint32_t prim) const {
+  const HitRecord& record = hit_records_[triangle_of(prim)];
+  return id_key(record.geometry_id, record.primitive_id);
+}
+
+// Intersection filter: accepts a candidate only if it beats the ray's best by
+// hit_is_better()'s rule (nearer, or as near with a smaller user id), so that
+// ties are settled by the rule, not by traversal or brick order. On
+// acceptance the segment is kept open to widen(t), so that candidates at
+// exactly t elsewhere in the brick are still offered to this filter.
+void EmbreeBrickAccel::tie_filter(const RTCFilterFunctionNArguments* args) {
+  const auto* self = static_cast<const EmbreeBrickAccel*>(args->geometryUserPtr);
+  TieRecord* records = reinterpret_cast<const TieContext*>(args->context)->records;
+  const unsigned n = args->N;
+  for (unsigned lane = 0; lane < n; ++lane) {
+    if (args->valid[lane] != -1) continue;
+    float& tfar = RTCRayN_tfar(args->ray, n, lane);  // the candidate's t
+    const float t = tfar;
+    const uint32_t prim = RTCHitN_primID(args->hit, n, lane);
+    TieRecord& best = records[RTCRayN_id(args->ray, n, lane)];
+    bool better = t < best.t;
+    if (t == best.t)
+      better = self->key_of(prim) < (best.prim != kNoPrim ? self->key_of(best.prim) : best.key);
+    if (!better) {
+      args->valid[lane] = 0;
+      continue;
+    }
+    best.t = t;
+    best.prim = prim;
+    tfar = widen(t);
+  }
+}
+
 void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
   if (scene_ == nullptr) return;
+  TieRecord records[kChunk];
   RTCRayHit found[kChunk];
   uint32_t found_ray[kChunk];
-  RTCIntersectContext incoherent;
-  rtcInitIntersectContext(&incoherent);  // RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
+  TieContext incoherent{{}, records};
+  rtcInitIntersectContext(&incoherent.rtc);  // RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT
+  TieContext coherent{{}, records};
+  rtcInitIntersectContext(&coherent.rtc);
+  coherent.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   for (std::size_t begin = 0; begin < ray_ids.size(); begin += kChunk) {
     const std::size_t end = std::min(ray_ids.size(), begin + kChunk);
     std::size_t count = 0;
     for (std::size_t j = begin; j < end; ++j) {
       const uint32_t i = ray_ids[j];
       const Ray& ray = rays[i];
-      const float tfar = std::min(ray.tfar, widen(hits[i].t));
+      const Hit& best = hits[i];
+      const float tfar = std::min(ray.tfar, widen(best.t));
       if (!(tfar > ray.tnear)) continue;  // nothing in (tnear, tfar] can improve it
+      records[count] = {best.t, kNoPrim,
+                        best.is_hit() ? id_key(best.geometry_id, best.primitive_id) : ~uint64_t{0}};
       RTCRayHit& rayhit = found[count];
       fill_ray(ray, tfar, rayhit.ray);
+      rayhit.ray.id = static_cast<uint32_t>(count);  // the filter's index into records
       rayhit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
       rayhit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
       found_ray[count++] = i;
     }
-    // One ray at a time (closest hit never goes as a coherent stream: without
-    // the tie filter, Embree's packet traversal can pick another of two
-    // triangles at bitwise equal t than single-ray traversal, which would make
-    // the answer depend on the batch). A hit's record (a random access into megabytes) is
-    // prefetched as soon as the ray is traced and read kLag rays later, so the
-    // cache miss overlaps with the next rays' traversal instead of stalling
-    // (measured: about 10% of the trace time on the bunny).
+    // A hit's record (a random access into megabytes) is prefetched as soon
+    // as the ray is traced and read kLag rays later, so the cache miss
+    // overlaps with the next rays' traversal instead of stalling (measured:
+    // about 10% of the trace time on the bunny).
     constexpr std::size_t kLag = 8;
-    for (std::size_t c = 0; c < count; ++c) {
-      rtcIntersect1(scene_, &incoherent, &found[c]);
-      prefetch_hit(found[c]);
-      if (c >= kLag) write_hits(found, found_ray, c - kLag, c - kLag + 1, hits);
+    std::size_t written = 0;
+    for (std::size_t run = 0; run < count; run += kRun) {
+      const std::size_t run_end = std::min(count, run + kRun);
+      ChunkCoherence coherence;
+      for (std::size_t c = run; c < run_end; ++c) coherence.add(rays[found_ray[c]]);
+      if (coherence.coherent(max_extent_, direction_spread_limit(rays[found_ray[run]].origin))) {
+        rtcIntersect1M(scene_, &coherent.rtc, found + run, static_cast<unsigned>(run_end - run),
+                       sizeof(RTCRayHit));
+        coherent_rays_.fetch_add(run_end - run, std::memory_order_relaxed);
+        for (std::size_t c = run; c < run_end; ++c) prefetch_hit(records[c].prim);
+        continue;
+      }
+      for (std::size_t c = run; c < run_end; ++c) {
+        rtcIntersect1(scene_, &incoherent.rtc, &found[c]);
+        prefetch_hit(records[c].prim);
+        if (c >= written + kLag) {
+          write_hits(found, records, found_ray, written, c + 1 - kLag, hits);
+          written = c + 1 - kLag;
+        }
+      }
     }
-    write_hits(found, found_ray, count > kLag ? count - kLag : 0, count, hits);
+    write_hits(found, records, found_ray, written, count, hits);
   }
 }
 
-inline void EmbreeBrickAccel::prefetch_hit(const RTCRayHit& found) const {
-  if (found.hit.geomID == RTC_INVALID_GEOMETRY_ID) return;
-  const uint32_t prim = found.hit.primID;
+inline void EmbreeBrickAccel::prefetch_hit(uint32_t prim) const {
+  if (prim == kNoPrim) return;
   if (prim_is_triangle_) {
     __builtin_prefetch(&hit_records_[prim]);
     __builtin_prefetch(reinterpret_cast<const char*>(&hit_records_[prim]) + sizeof(HitRecord) - 1);
@@ -310,21 +398,20 @@ inline void EmbreeBrickAccel::prefetch_hit(const RTCRayHit& found) const {
   }
 }
 
-void EmbreeBrickAccel::write_hits(const RTCRayHit* found, const uint32_t* found_ray, std::size_t begin,
-                                  std::size_t end, Hit* hits) const {
+void EmbreeBrickAccel::write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
+                                  std::size_t begin, std::size_t end, Hit* hits) const {
   for (std::size_t c = begin; c < end; ++c) {
-    if (found[c].hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
-    const uint32_t k = triangle_of(found[c].hit.primID);
-    const HitRecord& record = hit_records_[k];
-    const float t = found[c].ray.tfar;
+    const TieRecord& record = records[c];
+    if (record.prim == kNoPrim) continue;  // nothing here beats what the ray had
+    assert(found[c].hit.primID == record.prim);
+    const uint32_t k = triangle_of(record.prim);
     Hit& best = hits[found_ray[c]];
-    if (!hit_is_better(t, record.geometry_id, record.primitive_id, best)) continue;
-    best.t = t;
-    best.geometry_id = record.geometry_id;
-    best.primitive_id = record.primitive_id;
-    best.u = found[c].hit.u;
+    best.t = record.t;
+    best.geometry_id = hit_records_[k].geometry_id;
+    best.primitive_id = hit_records_[k].primitive_id;
+    best.u = found[c].hit.u;  // Embree keeps the last accepted candidate's: the record's
     best.v = found[c].hit.v;
-    best.normal = record.normal;
+    best.normal = hit_records_[k].normal;
   }
 }
 
@@ -340,20 +427,23 @@ void EmbreeBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* ra
   for (std::size_t begin = 0; begin < ray_ids.size(); begin += kChunk) {
     const std::size_t end = std::min(ray_ids.size(), begin + kChunk);
     std::size_t count = 0;
-    ChunkCoherence coherence;
     for (std::size_t j = begin; j < end; ++j) {
       const uint32_t i = ray_ids[j];
       const Ray& ray = rays[i];
       if (occluded[i] != 0 || !(ray.tfar > ray.tnear)) continue;
       fill_ray(ray, ray.tfar, found[count]);
       found_ray[count++] = i;
-      coherence.add(ray);
     }
-    if (coherence.coherent(max_extent_)) {
-      rtcOccluded1M(scene_, &coherent, found, static_cast<unsigned>(count), sizeof(RTCRay));
-      coherent_rays_.fetch_add(count, std::memory_order_relaxed);
-    } else {
-      for (std::size_t c = 0; c < count; ++c) rtcOccluded1(scene_, &incoherent, &found[c]);
+    for (std::size_t run = 0; run < count; run += kRun) {
+      const std::size_t run_end = std::min(count, run + kRun);
+      ChunkCoherence coherence;
+      for (std::size_t c = run; c < run_end; ++c) coherence.add(rays[found_ray[c]]);
+      if (coherence.coherent(max_extent_, direction_spread_limit(rays[found_ray[run]].origin))) {
+        rtcOccluded1M(scene_, &coherent, found + run, static_cast<unsigned>(run_end - run), sizeof(RTCRay));
+        coherent_rays_.fetch_add(run_end - run, std::memory_order_relaxed);
+      } else {
+        for (std::size_t c = run; c < run_end; ++c) rtcOccluded1(scene_, &incoherent, &found[c]);
+      }
     }
     for (std::size_t c = 0; c < count; ++c) {
       if (found[c].tfar == -kInfinity) occluded[found_ray[c]] = 1;  // Embree's mark for "blocked"

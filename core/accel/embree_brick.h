@@ -19,20 +19,24 @@
 //
 // Hits. A hit at t counts when tnear < t <= tfar (Embree's segment rule).
 // intersect() traces each ray over (tnear, min(tfar, widen(hits[i].t))],
-// widen(t) being t plus 2^-18 relative (about 32 float ulps: Embree's
-// rescaled tfar test can reject a candidate at exactly tfar), without an
-// intersection filter, and takes Embree's closest hit in the brick when
-// hit_is_better() says it beats the hit the ray brought from other bricks.
-// Tie rule: between bricks, equal t goes to the smaller (geometry_id,
-// primitive_id), applied in the (deterministic) order the engine visits a
-// ray's bricks; inside one brick, among triangles at bitwise equal t
-// (duplicates, a ray exactly through a shared edge), Embree's traversal picks
-// one. That choice depends only on the ray and the brick's BVH, and Embree's
-// builds are deterministic (same BVH whatever the thread count; tested), so
-// the answer is still the same whatever the batch, budget or thread count —
-// it just need not be the smallest id. (The tie filter that enforced the
-// smallest id inside a brick ran on every candidate and cost about a third of
-// the trace time; see docs/BENCHMARKS.md.)
+// widen(t) being t plus 2^-18 relative (about 32 float ulps), and decides in
+// an Embree intersection filter (tie_filter) which candidates to accept: only
+// those that beat the ray's best so far by hit_is_better()'s rule (nearer, or
+// as near with a smaller (geometry_id, primitive_id)), the best starting as
+// the hit the ray brought from other bricks. So ties are settled by the rule,
+// never by the order bricks are visited in nor by Embree's traversal order —
+// also between duplicate triangles inside one brick. The widening is needed
+// because Embree tests T <= |den| * tfar on rescaled values and reports t = T
+// * rcp(|den|): a duplicate at exactly the best t fails tfar = t for about
+// one ray in twenty (measured), so without it the winner of a tie would
+// depend on which brick came first (see TiesAcrossBricksFollowTheTieRule).
+// The filter is what lets closest hit use coherent streams at all: without
+// it Embree's packet traversal and its single-ray traversal can each pick
+// another of two triangles at bitwise equal t, so the answer would depend
+// on the batch (seen with duplicated triangles). It runs only on candidates
+// that pass Embree's t test, reads ids only at an exact tie, and for a
+// packet once per (packet, triangle): on the bunny's 1M incoherent rays the
+// trace with it was within noise of the trace without it.
 //
 // Written per improved ray: t (Embree's float t), the user's ids, Embree's
 // u, v (p = (1-u-v) v0 + u v1 + v v2) and the unit geometric normal computed
@@ -46,14 +50,14 @@
 // Embree's u, v lose accuracy with the ray origin's distance over the
 // triangle's size (about 1.5e-4 at a ratio of 300).
 //
-// Paths. Closest hit: every ray by rtcIntersect1 (without the tie filter a
-// coherent stream can pick another triangle at a bitwise-equal t than a
-// single ray, so streams would make the answer depend on the batch; tested
-// with duplicated triangles). Any hit: rays go in chunks of 256 in the order
-// given, a chunk of coherent rays (same direction octant, directions within
-// ~6 degrees, origins close) as one rtcOccluded1M stream with the coherent
-// flag, any other ray by rtcOccluded1; the occlusion bit is the same either
-// way (tested).
+// Paths. Rays go to Embree in chunks of 256 in the order given, cut into
+// runs of 64: a run of coherent rays (same direction octant, directions
+// within ~6 degrees, origins close) as one rtcIntersect1M / rtcOccluded1M
+// stream with the coherent flag (Embree traces it as packets; about 1.5-2x
+// faster for camera rays), any other ray by rtcIntersect1 / rtcOccluded1.
+// Both give bitwise equal results, ties included (tested with duplicated
+// triangles here and in the engine), so a ray's answer does not depend on
+// the batch it came in.
 //
 // Memory. memory_bytes() = the capacities of the triangle, hit-record and
 // index buffers (68 B/tri) + the bytes Embree's memory monitor attributed to
@@ -145,12 +149,19 @@ class EmbreeBrickAccel final : public BrickAccel {
 
  private:
   EmbreeBrickAccel() = default;
+  struct TieRecord;
+  struct TieContext;
+  static void tie_filter(const RTCFilterFunctionNArguments* args);
   uint64_t buffer_bytes() const;
-  void prefetch_hit(const RTCRayHit& found) const;
-  void write_hits(const RTCRayHit* found, const uint32_t* found_ray, std::size_t begin, std::size_t end,
-                  Hit* hits) const;
-  // The brick triangle behind Embree's primID.
+  void prefetch_hit(uint32_t prim) const;
+  void write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
+                  std::size_t begin, std::size_t end, Hit* hits) const;
+  // The brick triangle behind Embree's primID, and its user id as one key.
+  // Largest per-axis spread of unit directions a coherent run may have, for
+  // rays from about `origin` (see kCoherentAngularFraction).
+  float direction_spread_limit(const Vec3f& origin) const;
   uint32_t triangle_of(uint32_t prim) const { return prim_is_triangle_ ? prim : indices_[3 * prim] / 3; }
+  uint64_t key_of(uint32_t prim) const;
 
   EmbreeBrickConfig config_;
   uint32_t brick_id_ = 0;
@@ -168,6 +179,7 @@ class EmbreeBrickAccel final : public BrickAccel {
   std::vector<uint32_t> indices_;  // Embree's index buffer; capacity > size
   bool prim_is_triangle_ = true;   // no degenerate left out: primID == k
   float max_extent_ = 0;           // largest side of the brick's bounds (coherence test)
+  Vec3f center_;                   // centre of the brick's bounds (coherence test)
   uint64_t embree_bytes_ = 0;
   uint64_t build_peak_bytes_ = 0;
   double build_seconds_ = 0;

@@ -35,7 +35,48 @@ struct RayProgress {
   bool complete = false;
 };
 
+// Batches up to this many rays give their scratch back for reuse (about 50
+// bytes per ray); larger ones free it, so one huge batch does not pin its
+// memory for good.
+constexpr std::size_t kKeptScratchRays = std::size_t{1} << 21;
+// Scratches kept for reuse (one per concurrent batch).
+constexpr std::size_t kKeptScratches = 2;
+
 }  // namespace
+
+// Sized to the batch on entry and overwritten in the first parallel passes;
+// the brick queues keep their capacity (a traced queue swaps buffers with the
+// wave's batch instead of freeing it).
+struct QueryEngine::Scratch {
+  std::vector<uint8_t> valid;
+  std::vector<RayProgress> progress;
+  std::vector<uint32_t> first;
+  std::vector<std::vector<uint32_t>> queues;
+  std::vector<std::vector<uint32_t>> wave_batches;
+};
+
+QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache)
+    : store_(std::move(store)), cache_(std::move(cache)) {}
+
+QueryEngine::~QueryEngine() = default;
+
+std::unique_ptr<QueryEngine::Scratch> QueryEngine::take_scratch() {
+  {
+    std::lock_guard<std::mutex> lock(scratch_mutex_);
+    if (!free_scratch_.empty()) {
+      std::unique_ptr<Scratch> scratch = std::move(free_scratch_.back());
+      free_scratch_.pop_back();
+      return scratch;
+    }
+  }
+  return std::make_unique<Scratch>();
+}
+
+void QueryEngine::give_back_scratch(std::unique_ptr<Scratch> scratch) {
+  if (scratch->progress.size() > kKeptScratchRays) return;
+  std::lock_guard<std::mutex> lock(scratch_mutex_);
+  if (free_scratch_.size() < kKeptScratches) free_scratch_.push_back(std::move(scratch));
+}
 
 const char* ray_problem(const Ray& ray) {
   if (!is_finite(ray.origin)) return "origin is NaN or infinite";
@@ -86,9 +127,29 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   QueryStats stats;
   stats.rays = n;
 
-  // Validation and output reset, in parallel chunks; the first bad ray of
-  // each chunk is kept so that strict mode names the first of the batch.
-  std::vector<uint8_t> valid(n);
+  std::unique_ptr<Scratch> scratch = take_scratch();
+  struct GiveBack {
+    QueryEngine* engine;
+    std::unique_ptr<Scratch>& scratch;
+    ~GiveBack() { engine->give_back_scratch(std::move(scratch)); }
+  } give_back{this, scratch};
+  // Grown only (new elements are value-initialised once); every element
+  // below n is overwritten below, in parallel.
+  if (scratch->valid.size() < n) scratch->valid.resize(n);
+  if (scratch->progress.size() < n) scratch->progress.resize(n);
+  std::vector<uint8_t>& valid = scratch->valid;
+  std::vector<RayProgress>& progress = scratch->progress;
+  // A hierarchy of a few bricks is traversed flat (all leaf boxes tested at
+  // once), a larger one 4-wide: same bricks, same keys, fewer branches
+  // (upper_traversal.h).
+  FlatLeaves flat;
+  const bool use_flat = make_flat_leaves(upper, flat);
+  WideUpper wide;
+  if (!use_flat) make_wide_upper(upper, wide);
+
+  // Validation and reset of the outputs and per-ray progress, in parallel
+  // chunks; the first bad ray of each chunk is kept so that strict mode names
+  // the first of the batch.
   const std::size_t check_chunks = (n + kCheckGrain - 1) / kCheckGrain;
   std::vector<uint64_t> chunk_invalid(check_chunks, 0);
   std::vector<std::size_t> chunk_first_bad(check_chunks, n);
@@ -97,6 +158,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     for (std::size_t i = c * kCheckGrain; i < end; ++i) {
       const bool ok = ray_problem(rays[i]) == nullptr;
       valid[i] = ok;
+      progress[i] = RayProgress{};
       if (!ok) {
         if (chunk_first_bad[c] == n) chunk_first_bad[c] = i;
         ++chunk_invalid[c];
@@ -132,7 +194,6 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       accel.occluded(ids, rays.data(), occluded);
     }
   };
-  std::vector<RayProgress> progress(n);
   // Moves ray i past its current brick; returns the next brick or kInvalidId.
   auto advance = [&](std::size_t i, uint64_t& nodes) -> uint32_t {
     RayProgress& p = progress[i];
@@ -146,8 +207,10 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       return key.brick;
     }
     if (p.complete) return kInvalidId;
+    const SlabRay slab_ray(rays[i]);
     p.count = static_cast<uint8_t>(
-        next_bricks(upper, SlabRay(rays[i]), rays[i].tnear, limit, p.last, p.window, nodes));
+        use_flat ? next_bricks_flat(flat, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes)
+                 : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes));
     p.complete = p.count < kWindow;
     p.next = 0;
     if (p.count == 0) return kInvalidId;
@@ -184,8 +247,10 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     }
   } else {
     const uint32_t brick_count = store_->brick_count();
-    std::vector<std::vector<uint32_t>> queues(brick_count);
-    std::vector<uint32_t> waiting;  // bricks with a non-empty queue
+    std::vector<std::vector<uint32_t>>& queues = scratch->queues;
+    if (queues.size() < brick_count) queues.resize(brick_count);
+    for (auto& queue : queues) queue.clear();  // a failed batch may have left rays
+    std::vector<uint32_t> waiting;             // bricks with a non-empty queue
     std::vector<uint8_t> is_waiting(brick_count, 0);
     auto enqueue = [&](uint32_t brick, uint32_t ray) {
       queues[brick].push_back(ray);
@@ -199,11 +264,12 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     const auto t_upper = Clock::now();
     const std::size_t chunks = (n + kRayGrain - 1) / kRayGrain;
     std::vector<uint64_t> chunk_nodes(chunks, 0);
-    std::vector<uint32_t> first(n, kInvalidId);
+    if (scratch->first.size() < n) scratch->first.resize(n);
+    std::vector<uint32_t>& first = scratch->first;
     tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
       uint64_t nodes = 0;
       for (std::size_t i = c * kRayGrain; i < std::min(n, (c + 1) * kRayGrain); ++i) {
-        if (valid[i]) first[i] = advance(i, nodes);
+        first[i] = valid[i] ? advance(i, nodes) : kInvalidId;
       }
       chunk_nodes[c] = nodes;
     });
@@ -211,7 +277,6 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     for (std::size_t i = 0; i < n; ++i) {
       if (first[i] != kInvalidId) enqueue(first[i], static_cast<uint32_t>(i));
     }
-    first = {};
     stats.seconds_upper = seconds_since(t_upper);
 
     std::vector<std::vector<std::pair<uint32_t, uint32_t>>> moved;  // per task: (next brick, ray)
@@ -226,7 +291,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       Status status;
     };
     std::vector<WaveTask> tasks;
-    std::vector<std::vector<uint32_t>> wave_batches;
+    std::vector<std::vector<uint32_t>>& wave_batches = scratch->wave_batches;
     std::vector<uint32_t> resident_now, not_resident;
     while (!waiting.empty()) {
       // Wave: every waiting brick that is resident now is traced at once, in
@@ -242,12 +307,12 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         const auto t_brick = Clock::now();
         std::sort(resident_now.begin(), resident_now.end());  // a reproducible task order
         tasks.clear();
-        wave_batches.resize(resident_now.size());
+        if (wave_batches.size() < resident_now.size()) wave_batches.resize(resident_now.size());
         for (std::size_t q = 0; q < resident_now.size(); ++q) {
           const uint32_t b = resident_now[q];
           is_waiting[b] = 0;
-          wave_batches[q] = std::move(queues[b]);
-          queues[b] = {};
+          wave_batches[q].swap(queues[b]);  // both keep their buffers
+          queues[b].clear();
           stats.brick_visits += wave_batches[q].size();
           for (std::size_t begin = 0; begin < wave_batches[q].size(); begin += kRayGrain) {
             WaveTask task;
@@ -336,13 +401,19 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     }
   }
 
-  for (std::size_t i = 0; i < n; ++i) {
-    if constexpr (kKind == QueryKind::kClosestHit) {
-      stats.rays_hit += hits[i].is_hit();
-    } else {
-      stats.rays_hit += occluded[i] != 0;
+  std::vector<uint64_t> chunk_hits(check_chunks, 0);  // counted in parallel, summed in order
+  tbb::parallel_for(std::size_t{0}, check_chunks, [&](std::size_t c) {
+    uint64_t hit = 0;
+    for (std::size_t i = c * kCheckGrain; i < std::min(n, (c + 1) * kCheckGrain); ++i) {
+      if constexpr (kKind == QueryKind::kClosestHit) {
+        hit += hits[i].is_hit();
+      } else {
+        hit += occluded[i] != 0;
+      }
     }
-  }
+    chunk_hits[c] = hit;
+  });
+  for (const uint64_t hit : chunk_hits) stats.rays_hit += hit;
   const CacheCounters counters_after = cache_->counters();
   stats.brick_builds = counters_after.builds - counters_before.builds;
   stats.evictions = counters_after.evictions - counters_before.evictions;

@@ -20,8 +20,10 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "core/accel/brick_accel_factory.h"
 #include "core/cache/brick_cache.h"
@@ -74,7 +76,8 @@ struct QueryStats {
 
 class QueryEngine {
  public:
-  static Expected<std::unique_ptr<QueryEngine>> open(const std::string& store_directory, const EngineOptions& options);
+  static Expected<std::unique_ptr<QueryEngine>> open(const std::string& store_directory,
+                                                     const EngineOptions& options);
   static Expected<std::unique_ptr<QueryEngine>> create(std::shared_ptr<const SceneStore> store,
                                                        const EngineOptions& options);
 
@@ -88,16 +91,26 @@ class QueryEngine {
   const SceneStore& store() const { return *store_; }
   const BrickCache& cache() const { return *cache_; }
 
+  ~QueryEngine();
+
  private:
-  QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache)
-      : store_(std::move(store)), cache_(std::move(cache)) {}
+  // Per-batch working memory (per-ray progress, queues), kept for the next
+  // batch so that warm batches neither allocate nor page-fault it
+  // (query_engine.cpp).
+  struct Scratch;
+
+  QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache);
 
   template <QueryKind kKind>
   Status run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
              QueryStats* stats);
+  std::unique_ptr<Scratch> take_scratch();
+  void give_back_scratch(std::unique_ptr<Scratch> scratch);
 
   std::shared_ptr<const SceneStore> store_;
   std::unique_ptr<BrickCache> cache_;
+  std::mutex scratch_mutex_;  // taken twice per batch, never per ray
+  std::vector<std::unique_ptr<Scratch>> free_scratch_;
 };
 
 // Why a ray is invalid, or nullptr when it is fine.

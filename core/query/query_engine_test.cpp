@@ -232,6 +232,73 @@ TEST(QueryEngine, DuplicatedGeometryTiesAreAnsweredTheSameUnderAnyBudgetOrderAnd
   }
 }
 
+// Pinhole-camera rays at the box, row-major: whole chunks of them are
+// coherent, so the brick structure traces them as packets (streams).
+std::vector<Ray> camera_rays(const Aabb& box, int side) {
+  const Vec3f c = box.center();
+  const Vec3f e = box.extent();
+  const Vec3f eye = c + Vec3f(0.4f * e.x, 0.3f * e.y, 1.5f * e.z + 1.2f * e.x);
+  std::vector<Ray> rays;
+  for (int y = 0; y < side; ++y) {
+    for (int x = 0; x < side; ++x) {
+      const Vec3f target = c + Vec3f((x + 0.5f) / side * 1.1f * e.x - 0.55f * e.x,
+                                     (y + 0.5f) / side * 1.1f * e.y - 0.55f * e.y, 0.0f);
+      Ray r;
+      r.origin = eye;
+      r.direction = target - eye;
+      rays.push_back(r);
+    }
+  }
+  return rays;
+}
+
+// Duplicated triangles under camera rays: in a batch the rays go as coherent
+// packets, shuffled or one by one as single rays, split into uneven batches
+// as packets of other compositions. Every hit is a tie between the copies,
+// and the tie rule must pick the same one (the smaller geometry id) every
+// way, bitwise identically.
+TEST(QueryEngine, DuplicatedGeometryUnderCoherentRaysIsBatchIndependent) {
+  for (const uint32_t brick_triangles : {100000u, 150u}) {
+    SCOPED_TRACE("brick triangles " + std::to_string(brick_triangles));
+    const auto scene = pack({"gen:sphere?level=4", "gen:sphere?level=4"}, brick_triangles);
+    const auto rays = camera_rays(scene->bounds, 96);
+    auto unlimited = engine_for(*scene);
+    const std::vector<Hit> expected = intersect(*unlimited, rays);
+    std::size_t hits = 0;
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      if (!expected[i].is_hit()) continue;
+      ++hits;
+      EXPECT_EQ(expected[i].geometry_id, 0u) << "ray " << i;
+    }
+    EXPECT_GT(hits, rays.size() / 4);
+    QueryOptions serial;
+    serial.reorder = false;
+    EXPECT_TRUE(bitwise_equal(intersect(*unlimited, rays, serial), expected)) << "one by one";
+    std::vector<std::size_t> order(rays.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::shuffle(order.begin(), order.end(), std::mt19937_64(11));
+    std::vector<Ray> shuffled(rays.size());
+    for (std::size_t i = 0; i < order.size(); ++i) shuffled[i] = rays[order[i]];
+    const auto shuffled_hits = intersect(*unlimited, shuffled);
+    std::vector<Hit> unshuffled(rays.size());
+    for (std::size_t i = 0; i < order.size(); ++i) unshuffled[order[i]] = shuffled_hits[i];
+    EXPECT_TRUE(bitwise_equal(unshuffled, expected)) << "shuffled";
+    std::vector<Hit> joined;
+    for (std::size_t begin = 0; begin < rays.size();) {
+      const std::size_t end = std::min(rays.size(), begin + 17 + begin / 5);
+      const auto part = intersect(*unlimited, std::vector<Ray>(rays.begin() + begin, rays.begin() + end));
+      joined.insert(joined.end(), part.begin(), part.end());
+      begin = end;
+    }
+    EXPECT_TRUE(bitwise_equal(joined, expected)) << "split";
+    for (const int threads : {1, 2}) {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+      auto engine = engine_for(*scene, one_brick_budget(*unlimited));
+      EXPECT_TRUE(bitwise_equal(intersect(*engine, rays), expected)) << threads << " threads, one brick";
+    }
+  }
+}
+
 TEST(QueryEngine, AnyHitAgreesWithClosestHitExistingForEveryRay) {
   const auto scene = pack({"gen:sphere?level=3", "gen:torus?cx=2"}, 100);
   auto engine = engine_for(*scene);

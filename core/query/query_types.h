@@ -14,11 +14,9 @@
 namespace outcore {
 
 // Closest hit so far. Ties at equal t go to the smaller (geometry_id,
-// primitive_id). Brick structures apply it between the hit a ray brings and
-// the hit they find; inside one brick the structure's own (deterministic)
-// pick among triangles at bitwise equal t stands (embree_brick.h), so answers
-// are identical across batches, budgets and threads, and differ from the
-// float64 reference only at true ties.
+// primitive_id), between bricks and inside one (the embree brick's tie
+// filter, embree_brick.h), so the result is the same whatever order bricks
+// come in and whichever path (packet or single ray) traced the ray.
 inline bool hit_is_better(float t, uint32_t geometry_id, uint32_t primitive_id, const Hit& current) {
   if (t != current.t) return t < current.t;
   if (geometry_id != current.geometry_id) return geometry_id < current.geometry_id;

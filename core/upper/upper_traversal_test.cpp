@@ -1,0 +1,182 @@
+#include "core/upper/upper_traversal.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "core/upper/upper_hierarchy_builder.h"
+
+namespace outcore {
+namespace {
+
+// Boxes that overlap, coincide, are flat (zero extent on an axis) or share
+// faces, so that slab planes, NaN slabs and equal entries all occur.
+std::vector<Aabb> tricky_boxes(std::size_t n, std::mt19937& rng) {
+  std::uniform_int_distribution<int> cell(-2, 2), kind(0, 3);
+  std::vector<Aabb> boxes;
+  for (std::size_t i = 0; i < n; ++i) {
+    Aabb b;
+    const Vec3f lo(float(cell(rng)), float(cell(rng)), float(cell(rng)));
+    b.extend(lo);
+    switch (kind(rng)) {
+      case 0: b.extend(lo + Vec3f(1, 1, 1)); break;
+      case 1: b.extend(lo + Vec3f(2, 0, 1)); break;  // flat in y
+      case 2: b.extend(lo + Vec3f(0.5f, 3, 0.25f)); break;
+      default: break;  // a point
+    }
+    if (i > 0 && kind(rng) == 0) b = boxes[i - 1];  // coinciding with the previous one
+    boxes.push_back(b);
+  }
+  return boxes;
+}
+
+Ray tricky_ray(std::mt19937& rng) {
+  std::uniform_int_distribution<int> cell(-4, 4), zero(0, 3);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  Ray r;
+  // Origins on grid planes half the time (origin on a slab plane).
+  r.origin = zero(rng) == 0 ? Vec3f(float(cell(rng)), float(cell(rng)), float(cell(rng)))
+                            : Vec3f(4 * u(rng), 4 * u(rng), 4 * u(rng));
+  r.direction = Vec3f(zero(rng) == 0 ? 0.0f : u(rng), zero(rng) == 0 ? 0.0f : u(rng), u(rng));
+  if (r.direction == Vec3f(0, 0, 0)) r.direction = {0, 0, 1};
+  if (zero(rng) == 0) r.tfar = 2.0f;
+  if (zero(rng) == 0) r.tnear = 0.5f;
+  return r;
+}
+
+// Walks every brick of the ray front to back with window size N, both ways,
+// and expects the same windows at every step.
+template <std::size_t N>
+void expect_same_walk(const UpperHierarchy& upper, const FlatLeaves& flat, const Ray& ray) {
+  const SlabRay slab(ray);
+  BrickKey after;
+  for (int step = 0; step < 64; ++step) {
+    std::array<BrickKey, N> a{}, b{};
+    uint64_t nodes_a = 0, nodes_b = 0;
+    const uint32_t found_a = next_bricks(upper, slab, ray.tnear, ray.tfar, after, a, nodes_a);
+    const uint32_t found_b = next_bricks_flat(flat, slab, ray.tnear, ray.tfar, after, b, nodes_b);
+    ASSERT_EQ(found_a, found_b);
+    for (uint32_t k = 0; k < found_a; ++k) {
+      ASSERT_EQ(a[k].brick, b[k].brick) << "key " << k;
+      ASSERT_EQ(std::memcmp(&a[k].entry, &b[k].entry, sizeof(float)), 0) << "key " << k;
+    }
+    if (found_a < N) return;
+    after = a[found_a - 1];
+  }
+  FAIL() << "walk did not end";
+}
+
+TEST(UpperTraversal, FlatLeavesFindTheSameBricksAsTheHierarchy) {
+  std::mt19937 rng(7);
+  for (std::size_t n = 1; n <= FlatLeaves::kMaxLeaves; ++n) {
+    for (int scene = 0; scene < 20; ++scene) {
+      const auto boxes = tricky_boxes(n, rng);
+      const UpperHierarchy upper = build_upper_hierarchy(boxes);
+      FlatLeaves flat;
+      ASSERT_TRUE(make_flat_leaves(upper, flat));
+      ASSERT_EQ(flat.count, n);
+      for (int r = 0; r < 200; ++r) {
+        const Ray ray = tricky_ray(rng);
+        expect_same_walk<4>(upper, flat, ray);
+        expect_same_walk<2>(upper, flat, ray);
+        if (HasFatalFailure()) return;
+      }
+    }
+  }
+}
+
+// The simple reference: every leaf's own slab test, no hierarchy.
+template <std::size_t N>
+uint32_t reference_next_bricks(const UpperHierarchy& upper, const SlabRay& ray, float tmin, float tmax,
+                               const BrickKey& after, std::array<BrickKey, N>& window) {
+  uint32_t found = 0;
+  for (const UpperNode& node : upper.nodes) {
+    float entry;
+    if (!node.is_leaf || !detail::slab_test_scalar(ray, node.bounds, tmin, tmax, after.entry, entry))
+      continue;
+    const BrickKey key{entry, node.child_or_brick};
+    if (after < key) detail::insert_key(key, window, found);
+  }
+  return found;
+}
+
+// Front-to-back walks over large hierarchies find, window by window, what
+// testing every leaf finds, also when the horizon shrinks under the walk
+// (a hit found in a brick).
+TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
+  std::mt19937 rng(9);
+  for (const std::size_t n : {1, 2, 5, 9, 40, 300}) {
+    const auto boxes = tricky_boxes(n, rng);
+    const UpperHierarchy upper = build_upper_hierarchy(boxes);
+    WideUpper wide;
+    make_wide_upper(upper, wide);
+    if (n >= 9) {
+      EXPECT_LT(wide.nodes.size(), upper.nodes.size() / 2);
+    }
+    for (int r = 0; r < 2000; ++r) {
+      const Ray ray = tricky_ray(rng);
+      const SlabRay slab(ray);
+      BrickKey after;
+      float tmax = ray.tfar;
+      for (int step = 0; step < 400; ++step) {
+        std::array<BrickKey, 4> a{}, b{}, c{};
+        uint64_t nodes = 0;
+        const uint32_t found_a = next_bricks(upper, slab, ray.tnear, tmax, after, a, nodes);
+        const uint32_t found_b = reference_next_bricks(upper, slab, ray.tnear, tmax, after, b);
+        const uint32_t found_c = next_bricks_wide(wide, slab, ray.tnear, tmax, after, c, nodes);
+        ASSERT_EQ(found_a, found_b) << "n " << n << " ray " << r << " step " << step;
+        ASSERT_EQ(found_c, found_b) << "wide: n " << n << " ray " << r << " step " << step;
+        for (uint32_t k = 0; k < found_a; ++k) {
+          ASSERT_EQ(a[k].brick, b[k].brick);
+          ASSERT_EQ(std::memcmp(&a[k].entry, &b[k].entry, sizeof(float)), 0);
+          ASSERT_EQ(c[k].brick, b[k].brick);
+          ASSERT_EQ(std::memcmp(&c[k].entry, &b[k].entry, sizeof(float)), 0);
+        }
+        if (found_a < 4) break;
+        after = a[found_a - 1];
+        if (r % 3 == 0 && std::isfinite(a[1].entry)) tmax = std::max(a[1].entry, ray.tnear);  // a hit
+      }
+    }
+  }
+}
+
+// The SSE slab test against the scalar one: same verdict, bitwise same entry
+// (signed zeros included), over boxes with flat sides and points, rays on slab
+// planes and with zero direction components, and infinite or tiny segments.
+TEST(UpperTraversal, SseSlabTestIsBitwiseTheScalarOne) {
+  std::mt19937 rng(10);
+  std::uniform_real_distribution<float> u(0.0f, 3.0f);
+  for (int scene = 0; scene < 200; ++scene) {
+    const auto boxes = tricky_boxes(8, rng);
+    std::vector<UpperNode> nodes(boxes.size());
+    for (std::size_t k = 0; k < boxes.size(); ++k) nodes[k].bounds = boxes[k], nodes[k].child_or_brick = 5;
+    for (int r = 0; r < 200; ++r) {
+      const Ray ray = tricky_ray(rng);
+      const SlabRay slab(ray);
+      const float tmax = r % 4 == 0 ? std::numeric_limits<float>::infinity() : ray.tnear + u(rng);
+      const float min_exit = r % 5 == 0 ? -std::numeric_limits<float>::infinity() : u(rng);
+      for (const UpperNode& node : nodes) {
+        float a = -1, b = -1;
+        const bool hit_a = detail::slab_test(slab, node.bounds, ray.tnear, tmax, min_exit, a);
+        const bool hit_b = detail::slab_test_scalar(slab, node.bounds, ray.tnear, tmax, min_exit, b);
+        ASSERT_EQ(hit_a, hit_b);
+        ASSERT_EQ(std::memcmp(&a, &b, sizeof(float)), 0) << a << " vs " << b;
+      }
+    }
+  }
+}
+
+TEST(UpperTraversal, LargerHierarchiesAreNotFlattened) {
+  std::mt19937 rng(8);
+  const auto boxes = tricky_boxes(FlatLeaves::kMaxLeaves + 1, rng);
+  FlatLeaves flat;
+  EXPECT_FALSE(make_flat_leaves(build_upper_hierarchy(boxes), flat));
+  EXPECT_FALSE(make_flat_leaves(UpperHierarchy{}, flat));
+}
+
+}  // namespace
+}  // namespace outcore
