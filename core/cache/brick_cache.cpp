@@ -333,6 +333,16 @@ void BrickCache::hint_schedule(std::span<const uint32_t> upcoming) {
   }
 }
 
+std::vector<uint32_t> BrickCache::resident_bricks() const {
+  std::lock_guard lock(mutex_);
+  std::vector<uint32_t> out;
+  out.reserve(counters_.resident_bricks);
+  for (uint32_t b = 0; b < entries_.size(); ++b) {
+    if (entries_[b].state == State::kReady) out.push_back(b);
+  }
+  return out;
+}
+
 bool BrickCache::is_resident(uint32_t brick_id) const {
   std::lock_guard lock(mutex_);
   return brick_id < entries_.size() && entries_[brick_id].state == State::kReady;

@@ -108,6 +108,11 @@ class BrickCache {
   // Passes the bricks the caller will request next, soonest first, to the
   // policy (EvictionPolicy::on_schedule_hint).
   void hint_schedule(std::span<const uint32_t> upcoming);
+  // Whether the policy uses hints (fixed at construction).
+  bool wants_schedule_hint() const { return policy_->wants_schedule_hint(); }
+  // The ids of the bricks ready now, ascending (O(bricks) under the lock; for
+  // building hints, once per brick build, never per ray).
+  std::vector<uint32_t> resident_bricks() const;
 
  private:
   friend class PinnedBrick;

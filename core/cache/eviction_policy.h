@@ -50,6 +50,8 @@ class EvictionPolicy {
   virtual std::optional<uint32_t> choose_victim(const std::function<bool(uint32_t)>& evictable) = 0;
   // The bricks about to be requested, soonest first; replaces the last hint.
   virtual void on_schedule_hint(std::span<const uint32_t> upcoming) { (void)upcoming; }
+  // True when on_schedule_hint is used: callers skip the work of hinting otherwise.
+  virtual bool wants_schedule_hint() const { return false; }
   virtual const std::string& name() const = 0;
 };
 

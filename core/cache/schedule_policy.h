@@ -36,6 +36,7 @@ class SchedulePolicy final : public EvictionPolicy {
   void on_erase(uint32_t brick) override;
   std::optional<uint32_t> choose_victim(const std::function<bool(uint32_t)>& evictable) override;
   void on_schedule_hint(std::span<const uint32_t> upcoming) override;
+  bool wants_schedule_hint() const override { return true; }
   const std::string& name() const override;
 
   // Tracked bricks, least recently used first (for tests).

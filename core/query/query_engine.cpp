@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 
@@ -194,14 +195,30 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       accel.occluded(ids, rays.data(), occluded);
     }
   };
+  // Demand per brick, for a schedule-aware policy (SchedulePolicy): how many
+  // rays still have the brick ahead of them, in their window of upcoming
+  // bricks or in its queue. Counted only when the policy uses hints; one
+  // relaxed atomic per window entry and one per traced chunk.
+  const bool track_demand = options.reorder && cache_->wants_schedule_hint();
+  std::vector<std::atomic<uint32_t>> demand(track_demand ? store_->brick_count() : 0);
+  auto drop_window = [&](RayProgress& p) {
+    if (!track_demand) return;
+    for (; p.next < p.count; ++p.next) demand[p.window[p.next].brick].fetch_sub(1, std::memory_order_relaxed);
+  };
   // Moves ray i past its current brick; returns the next brick or kInvalidId.
   auto advance = [&](std::size_t i, uint64_t& nodes) -> uint32_t {
     RayProgress& p = progress[i];
-    if (finished(i)) return kInvalidId;
+    if (finished(i)) {
+      drop_window(p);
+      return kInvalidId;
+    }
     const float limit = horizon(i);
     if (p.next < p.count) {
       const BrickKey key = p.window[p.next];
-      if (key.entry > limit) return kInvalidId;
+      if (key.entry > limit) {
+        drop_window(p);
+        return kInvalidId;
+      }
       p.last = key;
       ++p.next;
       return key.brick;
@@ -213,6 +230,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
                  : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes));
     p.complete = p.count < kWindow;
     p.next = 0;
+    if (track_demand) {
+      for (uint8_t k = 0; k < p.count; ++k) demand[p.window[k].brick].fetch_add(1, std::memory_order_relaxed);
+    }
     if (p.count == 0) return kInvalidId;
     p.last = p.window[0];
     p.next = 1;
@@ -293,6 +313,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     std::vector<WaveTask> tasks;
     std::vector<std::vector<uint32_t>>& wave_batches = scratch->wave_batches;
     std::vector<uint32_t> resident_now, not_resident;
+    std::vector<uint32_t> schedule_hint;
     while (!waiting.empty()) {
       // Wave: every waiting brick that is resident now is traced at once, in
       // parallel over (brick, chunk) tasks — no build to wait for, and with
@@ -341,6 +362,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
           const std::vector<uint32_t>& batch = wave_batches[task.queue];
           const std::span<const uint32_t> ids(batch.data() + task.begin, task.end - task.begin);
           trace(pin.accel(), ids);
+          if (track_demand)
+            demand[task.brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
           for (const uint32_t ray : ids) {
             const uint32_t next = advance(ray, task.nodes);
             if (next != kInvalidId) moved[t].emplace_back(next, ray);
@@ -372,6 +395,21 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       std::vector<uint32_t> batch = std::move(queues[brick]);
       queues[brick] = {};
 
+      if (track_demand) {
+        // Belady on the known part of the schedule: resident bricks ranked
+        // by how many rays still need them (most first); those no ray needs
+        // are left out, and the policy evicts them first.
+        schedule_hint.clear();
+        for (const uint32_t b : cache_->resident_bricks()) {
+          if (demand[b].load(std::memory_order_relaxed) > 0) schedule_hint.push_back(b);
+        }
+        std::sort(schedule_hint.begin(), schedule_hint.end(), [&](uint32_t a, uint32_t b) {
+          const uint32_t da = demand[a].load(std::memory_order_relaxed),
+                         db = demand[b].load(std::memory_order_relaxed);
+          return da != db ? da > db : a < b;
+        });
+        cache_->hint_schedule(schedule_hint);
+      }
       PinnedBrick pin;
       OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
       const auto t_brick = Clock::now();
@@ -384,6 +422,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         const std::span<const uint32_t> ids(batch.data() + begin, end - begin);
         moved[c].clear();
         trace(accel, ids);
+        if (track_demand)
+          demand[brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
         uint64_t nodes = 0;
         for (const uint32_t ray : ids) {
           const uint32_t next = advance(ray, nodes);
