@@ -184,6 +184,19 @@ TEST_F(ProxySetTest, AnotherResolutionOrAnotherStoresFileIsRebuilt) {
   EXPECT_TRUE(report.loaded);
 }
 
+TEST_F(ProxySetTest, WhenProxiesBinCannotBeReplacedTheProxiesStayInMemory) {
+  // A directory in the way: the rename fails (also for root), nothing is left behind.
+  fs::create_directories(proxies_path_ + "/in_the_way");
+  ProxyOpenReport report;
+  const auto set = open(report);
+  EXPECT_FALSE(report.loaded);
+  EXPECT_FALSE(report.written);
+  EXPECT_TRUE(contains(report.write_error, "rename")) << report.write_error;
+  EXPECT_EQ(set->brick_count(), store_->brick_count());
+  EXPECT_GT(set->active_voxels(), 0u);
+  fs::remove_all(proxies_path_);
+}
+
 TEST_F(ProxySetTest, AnUnwritableStoreKeepsTheProxiesInMemory) {
   ASSERT_EQ(::chmod(path_.c_str(), 0555), 0);
   if (::access(path_.c_str(), W_OK) == 0) {
