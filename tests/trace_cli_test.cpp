@@ -663,6 +663,32 @@ TEST_F(TraceCli, CacheMbTooLargeForBytesIsRejected) {
   }
 }
 
+TEST_F(TraceCli, InfoShowsTheCachedProxiesAndACorruptFile) {
+  // The suite's in-process engine wrote proxies.bin on first open.
+  SubprocessResult r = outcore({"info", store_});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_TRUE(contains(r.stdout_text, "proxies       valid: resolution 32")) << r.stdout_text;
+  r = outcore({"info", store_, "--json"});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_TRUE(contains(r.stdout_text, "\"proxies\":{\"state\":\"valid\",\"resolution\":32")) << r.stdout_text;
+  // A corrupted copy: info says so, and the next trace rebuilds it.
+  TempDir copy_dir;
+  const std::string copy = copy_dir.file("scene");
+  fs::copy(store_, copy, fs::copy_options::recursive);
+  const std::string proxies = copy + "/proxies.bin";
+  std::string bytes = read_bytes(proxies);
+  bytes[bytes.size() - 5] ^= 0x20;
+  write_text_file(proxies, bytes);
+  r = outcore({"info", copy});
+  EXPECT_TRUE(contains(r.stdout_text, "proxies       corrupt")) << r.stdout_text;
+  r = outcore({"trace", copy, "--rays", rays_path_, "-o", copy_dir.file("h.npy"), "--stats"});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_TRUE(contains(r.stdout_text, "built and written to proxies.bin")) << r.stdout_text;
+  EXPECT_TRUE(hits_data(copy_dir.file("h.npy")) == reference_bytes(*hits_));
+  r = outcore({"info", copy});
+  EXPECT_TRUE(contains(r.stdout_text, "proxies       valid")) << r.stdout_text;
+}
+
 TEST_F(TraceCli, BadProxyOptionsAreRejectedByName) {
   TempDir out;
   const std::string h = out.file("h.npy");
