@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <random>
@@ -187,6 +188,32 @@ TEST(ProxyEngine, DuplicatedGeometryTiesStayTheSameWithProxies) {
   // Every hit is a tie between two copies in different bricks.
   const auto scene = pack({"gen:sphere?level=3", "gen:sphere?level=3", "gen:torus?cx=3"}, 100);
   expect_proxies_change_nothing(*scene, test_rays(scene->bounds, 3000, 4));
+}
+
+TEST(ProxyEngine, GrazingAndInPlaneRaysOverTheStadiumFloorAnswerTheSame) {
+  // The stadium's floor (y = 0) in bricks of few triangles; rays skimming it at
+  // angles from 1e-6 to 1e-1 rad, and rays in its plane (y = 0, dy = 0).
+  const auto scene = pack({"gen:stadium?size=50&level=3&object=2&segments=16"}, 64);
+  std::mt19937_64 rng(6);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<Ray> rays(3000);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    Ray& r = rays[i];
+    const float angle = std::pow(10.0f, -6.0f + 5.0f * u(rng));
+    const float heading = 6.2831853f * u(rng);
+    const float reach = 5 + 40 * u(rng);
+    r.origin = {-45 + 90 * u(rng), i % 10 == 0 ? 0.0f : reach * angle, -45 + 90 * u(rng)};
+    r.direction = {std::cos(heading), i % 10 == 0 ? 0.0f : -angle, std::sin(heading)};
+  }
+  auto off = engine(*scene, false);
+  auto on = engine(*scene, true);
+  QueryStats stats;
+  const auto expected = intersect(*off, rays);
+  EXPECT_TRUE(same_hits(intersect(*on, rays, true, &stats), expected));
+  std::size_t hit = 0;
+  for (const Hit& h : expected) hit += h.is_hit();
+  EXPECT_GT(hit, rays.size() / 2);
+  EXPECT_GT(stats.bricks_skipped_by_proxy, 0u);
 }
 
 TEST(ProxyEngine, TheEngineCachesItsProxiesInTheStoreAndRebuildsACorruptFile) {
