@@ -9,6 +9,7 @@ cd "$(dirname "$0")/.."
 APT_PACKAGES=(
   build-essential cmake ninja-build pkg-config clang-format
   libembree-dev libopenvdb-dev libcereal-dev libxxhash-dev
+  libboost-dev  # OpenVDB's headers include Boost; libopenvdb-dev does not pull it in
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler grpc-proto
   libspdlog-dev libtbb-dev libtinyobjloader-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev

@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "core/cli/commands.h"
@@ -35,6 +36,8 @@ struct ServeArgs {
   uint64_t cache_mb = 1024;
   std::string policy = "lru";
   std::string brick_accel = "embree";
+  bool no_proxies = false;
+  std::optional<int64_t> proxy_res;  // unset: the default resolution
   int threads = 0;
   int rpc_threads = 64;
   uint32_t max_message_mb = 64;
@@ -87,11 +90,32 @@ int run_serve(const ServeArgs& args) {
         std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, args.threads);
   }
   EngineOptions engine_options;
+  if (args.no_proxies && args.proxy_res) {
+    return report_command_error("serve", "--proxy-res has no effect with --no-proxies; give one of them");
+  }
+  engine_options.proxies = !args.no_proxies;
+  if (args.proxy_res) {
+    if (*args.proxy_res < kMinProxyResolution || *args.proxy_res > kMaxProxyResolution) {
+      return report_command_error(
+          "serve", "--proxy-res must be between " + std::to_string(kMinProxyResolution) + " and " +
+                       std::to_string(kMaxProxyResolution) + ", got " + std::to_string(*args.proxy_res));
+    }
+    engine_options.proxy_config.resolution = static_cast<uint32_t>(*args.proxy_res);
+  }
   engine_options.cache_bytes = args.cache_mb << 20;
   engine_options.eviction_policy = args.policy;
   engine_options.brick_accel = args.brick_accel;
   auto engine = QueryEngine::open(args.scene, engine_options);
   if (!engine.ok()) return report_command_error("serve", engine.status().message());
+  if (const ProxySet* proxies = (*engine)->proxies()) {
+    const ProxyOpenReport& report = (*engine)->proxy_report();
+    spdlog::info("brick proxies: resolution {}, {} bricks, {} bytes resident, {} in {:.3f} s",
+                 proxies->config().resolution, proxies->brick_count(), proxies->memory_bytes(),
+                 report.loaded ? "loaded from proxies.bin" : (report.written ? "built and written" : "built"),
+                 report.seconds);
+  } else {
+    spdlog::info("brick proxies off");
+  }
 
   server::ServiceOptions service_options;
   service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
@@ -159,6 +183,9 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
+  cmd->add_flag("--no-proxies", args->no_proxies, "Do not skip bricks by their occupancy proxies");
+  cmd->add_option("--proxy-res", args->proxy_res,
+                  "Proxy voxels along each brick's longest side (default 32)");
   cmd->add_option("--threads", args->threads, "Engine worker threads (default: all cores)");
   cmd->add_option("--rpc-threads", args->rpc_threads, "Most threads serving calls at once")
       ->capture_default_str();

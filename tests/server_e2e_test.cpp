@@ -185,6 +185,22 @@ TEST_F(ServerE2e, QueryErrorsNameWhatIsWrong) {
   EXPECT_FALSE(std::ifstream(out).good()) << "a failed query wrote its output";
 }
 
+TEST_F(ServerE2e, ServersWithoutProxiesOrAtAnotherProxyResolutionAnswerLikeTrace) {
+  const std::vector<std::vector<std::string>> variants = {{"--no-proxies"}, {"--proxy-res", "8"}};
+  for (const auto& extra : variants) {
+    Scene other;
+    other.store = gen_->store;
+    std::string error;
+    other.server = ServerProcess::start(other.store, extra, error);
+    ASSERT_NE(other.server, nullptr) << error;
+    expect_query_equals_trace(other, gen_->small_rays, false);
+    const std::string log = other.server->log();
+    EXPECT_TRUE(
+        contains(log, extra[0] == "--no-proxies" ? "brick proxies off" : "brick proxies: resolution 8"))
+        << log;
+  }
+}
+
 TEST_F(ServerE2e, ServeRejectsBadOptionsAndMissingStores) {
   SubprocessResult r = outcore({"serve", dir_->file("no-such-store")});
   EXPECT_EQ(r.exit_code, 1) << r.describe();
@@ -198,6 +214,12 @@ TEST_F(ServerE2e, ServeRejectsBadOptionsAndMissingStores) {
   r = outcore({"serve", gen_->store, "--listen", "nonsense"});
   EXPECT_EQ(r.exit_code, 1) << r.describe();
   EXPECT_TRUE(contains(r.stderr_text, "nonsense")) << r.stderr_text;
+  r = outcore({"serve", gen_->store, "--proxy-res", "0"});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "--proxy-res")) << r.stderr_text;
+  r = outcore({"serve", gen_->store, "--no-proxies", "--proxy-res", "8"});
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "--no-proxies")) << r.stderr_text;
   // The port is taken by the running server.
   r = outcore({"serve", gen_->store, "--listen", gen_->server->address()});
   EXPECT_EQ(r.exit_code, 1) << r.describe();

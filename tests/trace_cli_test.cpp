@@ -1,9 +1,8 @@
 // End-to-end tests of `outcore trace`, run as the real binary: the hits file
 // is bitwise the in-process QueryEngine answer whatever the reordering, cache
-// budget, thread count or repeats; --any-hit writes bools; statistics are
-// printed and written as JSON; bad rays files, invalid rays (with --strict),
-// unknown options, a missing store and a cache too small for one brick are
-// errors that name what is wrong.
+// budget, thread count, repeats or brick proxies (--no-proxies, --proxy-res); --any-hit writes bools;
+// statistics are printed and written as JSON; bad rays files, invalid rays (with --strict), unknown options,
+// a missing store and a cache too small for one brick are errors that name what is wrong.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -460,6 +459,37 @@ TEST_F(TraceCli, StatsJsonHasTheCounters) {
   EXPECT_EQ(json_uint(json, "cache_budget_bytes"), uint64_t{1024} << 20);
 }
 
+// ---- brick proxies ------------------------------------------------------------------
+
+TEST_F(TraceCli, SameAnswerWithoutProxiesOrAtAnotherProxyResolution) {
+  expect_reference_answer({"--no-proxies"});
+  expect_reference_answer({"--proxy-res", "8"});
+  expect_reference_answer({"--proxy-res", "64", "--no-reorder"});
+  expect_reference_answer({"--no-proxies", "--cache-mb", "1"});
+}
+
+TEST_F(TraceCli, StatsReportProxySkipsBytesAndTimeAndNothingWithoutProxies) {
+  TempDir out;
+  const std::string on_json = out.file("on.json"), off_json = out.file("off.json");
+  const SubprocessResult on = trace(rays_path_, out.file("h.npy"), {"--stats", "--stats-json", on_json});
+  ASSERT_TRUE(on.succeeded()) << on.describe();
+  EXPECT_TRUE(contains(on.stdout_text, "brick visits skipped")) << on.stdout_text;
+  EXPECT_TRUE(contains(on.stdout_text, "proxies: resolution 32")) << on.stdout_text;
+  const SubprocessResult off =
+      trace(rays_path_, out.file("h2.npy"), {"--stats", "--no-proxies", "--stats-json", off_json});
+  ASSERT_TRUE(off.succeeded()) << off.describe();
+  EXPECT_TRUE(contains(off.stdout_text, "proxies: off")) << off.stdout_text;
+  const std::string a = read_bytes(on_json), b = read_bytes(off_json);
+  ASSERT_TRUE(valid_json(a)) << a;
+  const uint64_t skipped = json_uint(a, "bricks_skipped_by_proxy");
+  EXPECT_GT(skipped, 0u) << a;
+  EXPECT_GT(json_uint(a, "proxy_bytes"), 0u) << a;
+  EXPECT_TRUE(contains(a, "\"proxy\":")) << a;
+  EXPECT_EQ(json_uint(b, "bricks_skipped_by_proxy"), 0u) << b;
+  EXPECT_EQ(json_uint(b, "proxy_bytes"), 0u) << b;
+  EXPECT_EQ(json_uint(a, "brick_visits") + skipped, json_uint(b, "brick_visits"));
+}
+
 TEST_F(TraceCli, StatsJsonOfRepeatsIsAnArrayWithAWarmCache) {
   TempDir out;
   const std::string path = out.file("stats.json");
@@ -631,6 +661,41 @@ TEST_F(TraceCli, CacheMbTooLargeForBytesIsRejected) {
   } else {
     EXPECT_TRUE(contains(r.stderr_text, "cache")) << r.stderr_text;
   }
+}
+
+TEST_F(TraceCli, InfoShowsTheCachedProxiesAndACorruptFile) {
+  // The suite's in-process engine wrote proxies.bin on first open.
+  SubprocessResult r = outcore({"info", store_});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_TRUE(contains(r.stdout_text, "proxies       valid: resolution 32")) << r.stdout_text;
+  r = outcore({"info", store_, "--json"});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_TRUE(contains(r.stdout_text, "\"proxies\":{\"state\":\"valid\",\"resolution\":32")) << r.stdout_text;
+  // A corrupted copy: info says so, and the next trace rebuilds it.
+  TempDir copy_dir;
+  const std::string copy = copy_dir.file("scene");
+  fs::copy(store_, copy, fs::copy_options::recursive);
+  const std::string proxies = copy + "/proxies.bin";
+  std::string bytes = read_bytes(proxies);
+  bytes[bytes.size() - 5] ^= 0x20;
+  write_text_file(proxies, bytes);
+  r = outcore({"info", copy});
+  EXPECT_TRUE(contains(r.stdout_text, "proxies       corrupt")) << r.stdout_text;
+  r = outcore({"trace", copy, "--rays", rays_path_, "-o", copy_dir.file("h.npy"), "--stats"});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_TRUE(contains(r.stdout_text, "built and written to proxies.bin")) << r.stdout_text;
+  EXPECT_TRUE(hits_data(copy_dir.file("h.npy")) == reference_bytes(*hits_));
+  r = outcore({"info", copy});
+  EXPECT_TRUE(contains(r.stdout_text, "proxies       valid")) << r.stdout_text;
+}
+
+TEST_F(TraceCli, BadProxyOptionsAreRejectedByName) {
+  TempDir out;
+  const std::string h = out.file("h.npy");
+  expect_trace_fails(trace(rays_path_, h, {"--proxy-res", "0"}), h, {"--proxy-res", "got 0"});
+  expect_trace_fails(trace(rays_path_, h, {"--proxy-res", "100000"}), h, {"--proxy-res", "100000"});
+  expect_trace_fails(trace(rays_path_, h, {"--proxy-res", "many"}), h, {"--proxy-res"});
+  expect_trace_fails(trace(rays_path_, h, {"--no-proxies", "--proxy-res", "8"}), h, {"--no-proxies"});
 }
 
 }  // namespace

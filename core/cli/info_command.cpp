@@ -5,6 +5,7 @@
 #include <memory>
 
 #include "core/cli/commands.h"
+#include "core/proxy/proxy_file.h"
 #include "core/store/scene_store.h"
 #include "core/util/json_writer.h"
 #include "core/util/progress.h"
@@ -23,7 +24,9 @@ BrickSizeStats brick_size_stats(const Manifest& m) {
   for (const auto& b : m.bricks) sizes.push_back(b.triangle_count);
   std::sort(sizes.begin(), sizes.end());
   BrickSizeStats s;
-  auto at = [&](double q) { return sizes[std::min(sizes.size() - 1, static_cast<size_t>(q * (sizes.size() - 1) + 0.5))]; };
+  auto at = [&](double q) {
+    return sizes[std::min(sizes.size() - 1, static_cast<size_t>(q * (sizes.size() - 1) + 0.5))];
+  };
   s.min = sizes.front();
   s.p10 = at(0.1);
   s.median = at(0.5);
@@ -31,6 +34,29 @@ BrickSizeStats brick_size_stats(const Manifest& m) {
   s.max = sizes.back();
   s.mean = static_cast<double>(m.triangle_count) / sizes.size();
   return s;
+}
+
+// What the store's proxies.bin (written by the engine on first open) holds.
+struct ProxyInfo {
+  std::string state;  // "absent", "valid", "stale" (another store) or "corrupt"
+  ProxyFileHeader header{};
+  uint64_t file_bytes = 0;
+};
+
+ProxyInfo proxy_info(const SceneStore& store) {
+  ProxyInfo info;
+  const std::string path = store.directory() + "/" + kProxyFileName;
+  const auto header = read_proxy_file_header(path);
+  if (!header.ok()) {
+    info.state = header.status().code() == StatusCode::kNotFound ? "absent" : "corrupt";
+    return info;
+  }
+  info.header = *header;
+  info.file_bytes = sizeof(ProxyFileHeader) + header->payload_bytes;
+  const bool ours = header->store_fingerprint == store_fingerprint(store.manifest()) &&
+                    header->brick_count == store.brick_count();
+  info.state = ours ? "valid" : "stale";
+  return info;
 }
 
 void write_box(JsonWriter& j, const Aabb& b) {
@@ -49,20 +75,29 @@ std::string info_json(const SceneStore& store) {
   j.key("inputs").begin_array();
   for (size_t i = 0; i < m.inputs.size(); ++i) {
     j.begin_object().field("geometry_id", static_cast<uint64_t>(i)).field("spec", m.inputs[i].spec);
-    j.field("triangles", m.inputs[i].triangle_count).field("degenerate_triangles", m.inputs[i].degenerate_count);
+    j.field("triangles", m.inputs[i].triangle_count)
+        .field("degenerate_triangles", m.inputs[i].degenerate_count);
     j.end_object();
   }
   j.end_array();
   j.field("triangles", m.triangle_count).field("degenerate_triangles", m.degenerate_count);
   j.key("bounds");
   write_box(j, m.bounds);
-  j.field("bricks", static_cast<uint64_t>(m.bricks.size())).field("brick_triangles_target", m.brick_triangles_target);
+  j.field("bricks", static_cast<uint64_t>(m.bricks.size()))
+      .field("brick_triangles_target", m.brick_triangles_target);
   j.key("brick_triangles").begin_object();
   j.field("min", sizes.min).field("p10", sizes.p10).field("median", sizes.median).field("p90", sizes.p90);
   j.field("max", sizes.max).field("mean", sizes.mean).end_object();
   j.key("upper_hierarchy").begin_object();
   j.field("nodes", static_cast<uint64_t>(m.upper.nodes.size())).field("depth", m.upper.depth()).end_object();
   j.field("bytes_on_disk", store.bytes_on_disk());
+  const ProxyInfo proxies = proxy_info(store);
+  j.key("proxies").begin_object().field("state", proxies.state);
+  if (proxies.state == "valid" || proxies.state == "stale") {
+    j.field("resolution", proxies.header.resolution).field("active_voxels", proxies.header.active_voxels);
+    j.field("memory_bytes", proxies.header.memory_bytes).field("file_bytes", proxies.file_bytes);
+  }
+  j.end_object();
   j.end_object();
   return j.str();
 }
@@ -70,8 +105,8 @@ std::string info_json(const SceneStore& store) {
 void print_info(const SceneStore& store) {
   const Manifest& m = store.manifest();
   const BrickSizeStats sizes = brick_size_stats(m);
-  std::printf("scene store   %s (format %u, packed by outcore %s)\n", store.directory().c_str(), m.format_version,
-              m.outcore_version.c_str());
+  std::printf("scene store   %s (format %u, packed by outcore %s)\n", store.directory().c_str(),
+              m.format_version, m.outcore_version.c_str());
   std::printf("inputs        %zu\n", m.inputs.size());
   for (size_t i = 0; i < m.inputs.size(); ++i) {
     std::printf("  [%zu] %s: %llu triangles (%llu degenerate)\n", i, m.inputs[i].spec.c_str(),
@@ -80,13 +115,23 @@ void print_info(const SceneStore& store) {
   }
   std::printf("triangles     %llu (%llu degenerate)\n", static_cast<unsigned long long>(m.triangle_count),
               static_cast<unsigned long long>(m.degenerate_count));
-  std::printf("bounds        [%g %g %g] .. [%g %g %g]\n", m.bounds.lo.x, m.bounds.lo.y, m.bounds.lo.z, m.bounds.hi.x,
-              m.bounds.hi.y, m.bounds.hi.z);
+  std::printf("bounds        [%g %g %g] .. [%g %g %g]\n", m.bounds.lo.x, m.bounds.lo.y, m.bounds.lo.z,
+              m.bounds.hi.x, m.bounds.hi.y, m.bounds.hi.z);
   std::printf("bricks        %zu (target <= %u triangles)\n", m.bricks.size(), m.brick_triangles_target);
   std::printf("  triangles   min %u, p10 %u, median %u, p90 %u, max %u, mean %.1f\n", sizes.min, sizes.p10,
               sizes.median, sizes.p90, sizes.max, sizes.mean);
   std::printf("upper BVH     %zu nodes, depth %u\n", m.upper.nodes.size(), m.upper.depth());
   std::printf("on disk       %s\n", human_bytes(static_cast<double>(store.bytes_on_disk())).c_str());
+  const ProxyInfo proxies = proxy_info(store);
+  if (proxies.state == "valid" || proxies.state == "stale") {
+    std::printf("proxies       %s: resolution %u, %llu voxels, %s resident, %s on disk\n",
+                proxies.state.c_str(), proxies.header.resolution,
+                static_cast<unsigned long long>(proxies.header.active_voxels),
+                human_bytes(static_cast<double>(proxies.header.memory_bytes)).c_str(),
+                human_bytes(static_cast<double>(proxies.file_bytes)).c_str());
+  } else {
+    std::printf("proxies       %s (built on the first trace or serve)\n", proxies.state.c_str());
+  }
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <limits>
 #include <memory>
+#include <optional>
 
 #include "core/cli/commands.h"
 #include "core/io/npy.h"
@@ -28,6 +29,8 @@ struct TraceArgs {
   std::string triangle_test;  // shorthand for --accel-opt triangle_test=NAME (bvh only)
   bool reference = false;     // float64 ground truth: brick structure "reference"
   bool no_reorder = false;
+  bool no_proxies = false;
+  std::optional<int64_t> proxy_res;  // unset: the default resolution
   int threads = 0;
   bool print_stats = false;
   std::string stats_json_path;
@@ -66,6 +69,18 @@ int run_trace(const TraceArgs& args) {
                                              ", got " + std::to_string(args.cache_mb));
   }
   EngineOptions engine_options;
+  if (args.no_proxies && args.proxy_res) {
+    return report_command_error("trace", "--proxy-res has no effect with --no-proxies; give one of them");
+  }
+  engine_options.proxies = !args.no_proxies;
+  if (args.proxy_res) {
+    if (*args.proxy_res < kMinProxyResolution || *args.proxy_res > kMaxProxyResolution) {
+      return report_command_error(
+          "trace", "--proxy-res must be between " + std::to_string(kMinProxyResolution) + " and " +
+                       std::to_string(kMaxProxyResolution) + ", got " + std::to_string(*args.proxy_res));
+    }
+    engine_options.proxy_config.resolution = static_cast<uint32_t>(*args.proxy_res);
+  }
   engine_options.cache_bytes = args.cache_mb << 20;
   engine_options.eviction_policy = args.policy;
   engine_options.brick_accel = args.brick_accel;
@@ -100,6 +115,17 @@ int run_trace(const TraceArgs& args) {
   if (!engine.ok()) return report_command_error("trace", engine.status().message());
   auto rays = read_rays_npy(args.rays_path);
   if (!rays.ok()) return report_command_error("trace", rays.status().message());
+  if (args.print_stats) {
+    if (const ProxySet* proxies = (*engine)->proxies()) {
+      const ProxyOpenReport& report = (*engine)->proxy_report();
+      std::printf("proxies: resolution %u, %u bricks, %.2f MiB, %s in %.3f s\n", proxies->config().resolution,
+                  proxies->brick_count(), proxies->memory_bytes() / 1048576.0,
+                  report.loaded    ? "loaded from proxies.bin"
+                  : report.written ? "built and written to proxies.bin"
+                                   : "built (kept in memory)",
+                  report.seconds);
+    }
+  }
 
   QueryOptions query_options;
   query_options.reorder = !args.no_reorder;
@@ -169,6 +195,11 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--reference", args->reference,
                 "Ground truth: float64 brute force per brick (watertight, slow) on the same store");
   cmd->add_flag("--no-reorder", args->no_reorder, "Trace rays one by one in input order (for comparison)");
+  cmd->add_flag("--no-proxies", args->no_proxies,
+                "Do not skip bricks by their occupancy proxies (for comparison; answers are the same)");
+  cmd->add_option("--proxy-res", args->proxy_res,
+                  "Proxy voxels along each brick's longest side (default 32; proxies.bin is rebuilt "
+                  "when it has another)");
   cmd->add_option("--threads", args->threads, "Worker threads (default: all cores)");
   cmd->add_flag("--stats", args->print_stats, "Print query statistics");
   cmd->add_option("--stats-json", args->stats_json_path, "Write query statistics as JSON to this file");

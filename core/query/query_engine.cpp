@@ -1,6 +1,9 @@
 #include "core/query/query_engine.h"
 
 #include <tbb/parallel_for.h>
+#if defined(__x86_64__) || defined(__i386__)
+#include <x86intrin.h>
+#endif
 
 #include <algorithm>
 #include <atomic>
@@ -18,6 +21,31 @@ using Clock = std::chrono::steady_clock;
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
+
+// A cheap timestamp for timing short calls (proxy tests, about 100 ns each):
+// the time-stamp counter where there is one, converted to seconds against the
+// steady clock over the whole query.
+inline uint64_t ticks() {
+#if defined(__x86_64__) || defined(__i386__)
+  return __rdtsc();
+#else
+  return static_cast<uint64_t>(Clock::now().time_since_epoch().count());
+#endif
+}
+
+// What advancing rays counts, per task (merged in task order).
+struct AdvanceCounters {
+  uint64_t nodes = 0;
+  uint64_t proxy_tests = 0;
+  uint64_t skipped = 0;
+  uint64_t proxy_ticks = 0;
+
+  void add_to(QueryStats& stats) const {
+    stats.upper_nodes_visited += nodes;
+    stats.proxy_tests += proxy_tests;
+    stats.bricks_skipped_by_proxy += skipped;
+  }
+};
 
 // Upcoming bricks kept per ray; more are found by re-traversal when used up.
 constexpr std::size_t kWindow = 4;
@@ -56,8 +84,12 @@ struct QueryEngine::Scratch {
   std::vector<std::vector<uint32_t>> wave_batches;
 };
 
-QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache)
-    : store_(std::move(store)), cache_(std::move(cache)) {}
+QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
+                         std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report)
+    : store_(std::move(store)),
+      cache_(std::move(cache)),
+      proxies_(std::move(proxies)),
+      proxy_report_(std::move(proxy_report)) {}
 
 QueryEngine::~QueryEngine() = default;
 
@@ -100,10 +132,16 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   if (options.cache_bytes == 0) return invalid_argument("the cache budget must be positive");
   OUTCORE_ASSIGN_OR_RETURN(auto builder, make_brick_builder(options.brick_accel, options.accel_options));
   OUTCORE_ASSIGN_OR_RETURN(auto policy, make_eviction_policy(options.eviction_policy));
+  std::unique_ptr<const ProxySet> proxies;
+  ProxyOpenReport proxy_report;
+  if (options.proxies) {
+    OUTCORE_ASSIGN_OR_RETURN(proxies, ProxySet::open(*store, options.proxy_config, &proxy_report));
+  }
   auto cache =
       std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
   if (options.access_trace) cache->set_access_trace(options.access_trace);
-  return std::unique_ptr<QueryEngine>(new QueryEngine(std::move(store), std::move(cache)));
+  return std::unique_ptr<QueryEngine>(
+      new QueryEngine(std::move(store), std::move(cache), std::move(proxies), std::move(proxy_report)));
 }
 
 Status QueryEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits, const QueryOptions& options,
@@ -122,6 +160,9 @@ template <QueryKind kKind>
 Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
                         QueryStats* stats_out) {
   const auto start = Clock::now();
+  const uint64_t ticks_start = ticks();
+  uint64_t proxy_ticks = 0;
+  const ProxySet* const proxies = proxies_.get();
   const CacheCounters counters_before = cache_->counters();
   const UpperHierarchy& upper = store_->manifest().upper;
   const std::size_t n = rays.size();
@@ -206,37 +247,54 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     for (; p.next < p.count; ++p.next) demand[p.window[p.next].brick].fetch_sub(1, std::memory_order_relaxed);
   };
   // Moves ray i past its current brick; returns the next brick or kInvalidId.
-  auto advance = [&](std::size_t i, uint64_t& nodes) -> uint32_t {
+  // A brick whose proxy the ray's remaining segment cannot hit is passed over
+  // like a traced brick without a hit (it has none to give), so the ray's
+  // hit, horizon and brick order are what they are with proxies off.
+  auto advance = [&](std::size_t i, AdvanceCounters& counters) -> uint32_t {
     RayProgress& p = progress[i];
     if (finished(i)) {
       drop_window(p);
       return kInvalidId;
     }
     const float limit = horizon(i);
-    if (p.next < p.count) {
-      const BrickKey key = p.window[p.next];
-      if (key.entry > limit) {
-        drop_window(p);
-        return kInvalidId;
+    for (;;) {
+      BrickKey key;
+      if (p.next < p.count) {
+        key = p.window[p.next];
+        if (key.entry > limit) {
+          drop_window(p);
+          return kInvalidId;
+        }
+        p.last = key;
+        ++p.next;
+      } else {
+        if (p.complete) return kInvalidId;
+        const SlabRay slab_ray(rays[i]);
+        p.count = static_cast<uint8_t>(
+            use_flat
+                ? next_bricks_flat(flat, slab_ray, rays[i].tnear, limit, p.last, p.window, counters.nodes)
+                : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, counters.nodes));
+        p.complete = p.count < kWindow;
+        p.next = 0;
+        if (track_demand) {
+          for (uint8_t k = 0; k < p.count; ++k)
+            demand[p.window[k].brick].fetch_add(1, std::memory_order_relaxed);
+        }
+        if (p.count == 0) return kInvalidId;
+        key = p.window[0];
+        p.last = key;
+        p.next = 1;
       }
-      p.last = key;
-      ++p.next;
-      return key.brick;
+      if (proxies == nullptr) return key.brick;
+      ++counters.proxy_tests;
+      const uint64_t t0 = ticks();
+      const bool may_hit = proxies->brick(key.brick).may_hit(rays[i], rays[i].tnear, limit);
+      counters.proxy_ticks += ticks() - t0;
+      if (may_hit) return key.brick;
+      ++counters.skipped;
+      // Passed over: the ray no longer needs the brick.
+      if (track_demand) demand[key.brick].fetch_sub(1, std::memory_order_relaxed);
     }
-    if (p.complete) return kInvalidId;
-    const SlabRay slab_ray(rays[i]);
-    p.count = static_cast<uint8_t>(
-        use_flat ? next_bricks_flat(flat, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes)
-                 : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, nodes));
-    p.complete = p.count < kWindow;
-    p.next = 0;
-    if (track_demand) {
-      for (uint8_t k = 0; k < p.count; ++k) demand[p.window[k].brick].fetch_add(1, std::memory_order_relaxed);
-    }
-    if (p.count == 0) return kInvalidId;
-    p.last = p.window[0];
-    p.next = 1;
-    return p.last.brick;
   };
 
   auto acquire = [&](uint32_t brick, PinnedBrick& pin) -> Status {
@@ -256,13 +314,15 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       if (!valid[i]) continue;
       const uint32_t id = static_cast<uint32_t>(i);
       const auto t0 = Clock::now();
-      for (uint32_t brick = advance(i, stats.upper_nodes_visited); brick != kInvalidId;
-           brick = advance(i, stats.upper_nodes_visited)) {
+      AdvanceCounters counters;
+      for (uint32_t brick = advance(i, counters); brick != kInvalidId; brick = advance(i, counters)) {
         PinnedBrick pin;
         OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
         trace(pin.accel(), std::span<const uint32_t>(&id, 1));
         ++stats.brick_visits;
       }
+      counters.add_to(stats);
+      proxy_ticks += counters.proxy_ticks;
       stats.seconds_brick += seconds_since(t0);
     }
   } else {
@@ -283,17 +343,20 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     // First brick of every ray, in parallel; per-chunk results merged in order.
     const auto t_upper = Clock::now();
     const std::size_t chunks = (n + kRayGrain - 1) / kRayGrain;
-    std::vector<uint64_t> chunk_nodes(chunks, 0);
+    std::vector<AdvanceCounters> chunk_counters(chunks);
     if (scratch->first.size() < n) scratch->first.resize(n);
     std::vector<uint32_t>& first = scratch->first;
     tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
-      uint64_t nodes = 0;
+      AdvanceCounters counters;
       for (std::size_t i = c * kRayGrain; i < std::min(n, (c + 1) * kRayGrain); ++i) {
-        first[i] = valid[i] ? advance(i, nodes) : kInvalidId;
+        first[i] = valid[i] ? advance(i, counters) : kInvalidId;
       }
-      chunk_nodes[c] = nodes;
+      chunk_counters[c] = counters;
     });
-    for (uint64_t nodes : chunk_nodes) stats.upper_nodes_visited += nodes;
+    for (const AdvanceCounters& counters : chunk_counters) {
+      counters.add_to(stats);
+      proxy_ticks += counters.proxy_ticks;
+    }
     for (std::size_t i = 0; i < n; ++i) {
       if (first[i] != kInvalidId) enqueue(first[i], static_cast<uint32_t>(i));
     }
@@ -305,7 +368,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       uint32_t brick;
       uint32_t queue;  // index into wave_batches
       std::size_t begin, end;
-      uint64_t nodes = 0;
+      AdvanceCounters counters;
       double build_seconds = 0;
       bool acquired = false, was_hit = false;
       Status status;
@@ -365,14 +428,15 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
           if (track_demand)
             demand[task.brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
           for (const uint32_t ray : ids) {
-            const uint32_t next = advance(ray, task.nodes);
+            const uint32_t next = advance(ray, task.counters);
             if (next != kInvalidId) moved[t].emplace_back(next, ray);
           }
         });
         for (std::size_t t = 0; t < tasks.size(); ++t) {
           const WaveTask& task = tasks[t];
           OUTCORE_RETURN_IF_ERROR(task.status);
-          stats.upper_nodes_visited += task.nodes;
+          task.counters.add_to(stats);
+          proxy_ticks += task.counters.proxy_ticks;
           stats.seconds_build += task.build_seconds;
           ++stats.brick_acquisitions;
           ++(task.was_hit ? stats.cache_hits : stats.cache_misses);
@@ -416,7 +480,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       const BrickAccel& accel = pin.accel();
       const std::size_t batch_chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
       moved.resize(std::max(moved.size(), batch_chunks));
-      chunk_nodes.assign(batch_chunks, 0);
+      chunk_counters.assign(batch_chunks, AdvanceCounters{});
       tbb::parallel_for(std::size_t{0}, batch_chunks, [&](std::size_t c) {
         const std::size_t begin = c * kRayGrain, end = std::min(batch.size(), begin + kRayGrain);
         const std::span<const uint32_t> ids(batch.data() + begin, end - begin);
@@ -424,17 +488,18 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         trace(accel, ids);
         if (track_demand)
           demand[brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
-        uint64_t nodes = 0;
+        AdvanceCounters counters;
         for (const uint32_t ray : ids) {
-          const uint32_t next = advance(ray, nodes);
+          const uint32_t next = advance(ray, counters);
           if (next != kInvalidId) moved[c].emplace_back(next, ray);
         }
-        chunk_nodes[c] = nodes;
+        chunk_counters[c] = counters;
       });
       pin.release();
       stats.brick_visits += batch.size();
       for (std::size_t c = 0; c < batch_chunks; ++c) {
-        stats.upper_nodes_visited += chunk_nodes[c];
+        chunk_counters[c].add_to(stats);
+        proxy_ticks += chunk_counters[c].proxy_ticks;
         for (const auto& [next, ray] : moved[c]) enqueue(next, ray);
       }
       stats.seconds_brick += seconds_since(t_brick);
@@ -460,6 +525,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   stats.peak_bytes_resident = counters_after.peak_resident_bytes;
   stats.cache_budget_bytes = cache_->budget_bytes();
   stats.seconds_total = seconds_since(start);
+  if (proxies != nullptr) {
+    stats.proxy_bytes = proxies->memory_bytes();
+    const uint64_t elapsed_ticks = ticks() - ticks_start;
+    if (elapsed_ticks > 0) stats.seconds_proxy = stats.seconds_total * proxy_ticks / elapsed_ticks;
+  }
   if (stats_out != nullptr) *stats_out = stats;
   return Status::Ok();
 }
@@ -469,6 +539,8 @@ std::string QueryStats::to_json() const {
   j.begin_object();
   j.field("rays", rays).field("invalid_rays", invalid_rays).field("rays_hit", rays_hit);
   j.field("upper_nodes_visited", upper_nodes_visited).field("brick_visits", brick_visits);
+  j.field("proxy_tests", proxy_tests).field("bricks_skipped_by_proxy", bricks_skipped_by_proxy);
+  j.field("proxy_bytes", proxy_bytes);
   j.field("brick_acquisitions", brick_acquisitions)
       .field("cache_hits", cache_hits)
       .field("cache_misses", cache_misses);
@@ -476,7 +548,7 @@ std::string QueryStats::to_json() const {
   j.field("peak_bytes_resident", peak_bytes_resident).field("cache_budget_bytes", cache_budget_bytes);
   j.key("seconds").begin_object();
   j.field("total", seconds_total).field("upper", seconds_upper).field("build", seconds_build);
-  j.field("brick", seconds_brick).end_object();
+  j.field("brick", seconds_brick).field("proxy", seconds_proxy).end_object();
   j.field("rays_per_second", seconds_total > 0 ? rays / seconds_total : 0.0);
   j.end_object();
   return j.str();
@@ -500,7 +572,21 @@ std::string QueryStats::to_text() const {
       static_cast<unsigned long long>(cache_hits), static_cast<unsigned long long>(cache_misses),
       static_cast<unsigned long long>(brick_builds), static_cast<unsigned long long>(evictions),
       peak_bytes_resident / 1048576.0, cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
-  return buf;
+  std::string text = buf;
+  if (proxy_bytes > 0) {
+    const uint64_t candidates = brick_visits + bricks_skipped_by_proxy;
+    std::snprintf(buf, sizeof buf,
+                  "  proxies: %llu of %llu brick visits skipped (%.1f %%), %llu tests, %.3f s (all threads), "
+                  "%.2f MiB resident\n",
+                  static_cast<unsigned long long>(bricks_skipped_by_proxy),
+                  static_cast<unsigned long long>(candidates),
+                  candidates > 0 ? 100.0 * bricks_skipped_by_proxy / candidates : 0.0,
+                  static_cast<unsigned long long>(proxy_tests), seconds_proxy, proxy_bytes / 1048576.0);
+    text += buf;
+  } else {
+    text += "  proxies: off\n";
+  }
+  return text;
 }
 
 template Status QueryEngine::run<QueryKind::kClosestHit>(std::span<const Ray>, Hit*, uint8_t*,

@@ -10,6 +10,11 @@
 // whatever the batch, budget, policy or thread count, so answers are bitwise
 // identical across all of them.
 //
+// Brick proxies (core/proxy, on by default): before a ray is queued at a
+// brick, its segment is marched through the brick's resident occupancy grid;
+// a brick it cannot hit is skipped without being loaded or traced. Proxies
+// are conservative, so answers are bitwise the same with them off.
+//
 // Invalid rays (NaN/Inf components, zero direction, tnear < 0 or not finite,
 // tnear > tfar, NaN tfar) are answered as misses and counted; with strict
 // they are an INVALID_ARGUMENT naming the first bad ray.
@@ -27,6 +32,8 @@
 
 #include "core/accel/brick_accel_factory.h"
 #include "core/cache/brick_cache.h"
+#include "core/proxy/proxy_builder.h"
+#include "core/proxy/proxy_set.h"
 #include "core/query/query_types.h"
 #include "core/query/ray_types.h"
 #include "core/store/scene_store.h"
@@ -42,6 +49,10 @@ struct EngineOptions {
   // When set, the cache records every brick acquisition into it
   // (core/cache/access_trace.h); close it after the engine is destroyed.
   std::shared_ptr<AccessTraceWriter> access_trace;
+  // Skip bricks a ray cannot hit by their occupancy proxies (read from the
+  // store's proxies.bin, or built on open and cached there).
+  bool proxies = true;
+  ProxyBuildConfig proxy_config;
 };
 
 struct QueryOptions {
@@ -57,8 +68,11 @@ struct QueryStats {
   uint64_t invalid_rays = 0;
   uint64_t rays_hit = 0;
   uint64_t upper_nodes_visited = 0;
-  uint64_t brick_visits = 0;        // (ray, brick) traversals
-  uint64_t brick_acquisitions = 0;  // times a brick was taken from the cache
+  uint64_t brick_visits = 0;             // (ray, brick) traversals
+  uint64_t proxy_tests = 0;              // (ray, brick) candidates tested against a proxy
+  uint64_t bricks_skipped_by_proxy = 0;  // of those, visits avoided (the ray cannot hit the brick)
+  uint64_t proxy_bytes = 0;              // the engine's resident proxies (0 without)
+  uint64_t brick_acquisitions = 0;       // times a brick was taken from the cache
   uint64_t cache_hits = 0;
   uint64_t cache_misses = 0;
   uint64_t brick_builds = 0;  // cache-wide during this query (others' batches included)
@@ -69,6 +83,7 @@ struct QueryStats {
   double seconds_upper = 0;  // first upper-hierarchy pass for every ray
   double seconds_build = 0;  // waiting for bricks: load + build (or another batch's build)
   double seconds_brick = 0;  // tracing inside bricks, plus finding each ray's next brick
+  double seconds_proxy = 0;  // proxy tests, summed over threads (part of upper and brick)
 
   std::string to_json() const;
   std::string to_text() const;
@@ -90,6 +105,10 @@ class QueryEngine {
 
   const SceneStore& store() const { return *store_; }
   const BrickCache& cache() const { return *cache_; }
+  // nullptr when proxies are off.
+  const ProxySet* proxies() const { return proxies_.get(); }
+  // How the proxies were obtained (loaded from proxies.bin or built).
+  const ProxyOpenReport& proxy_report() const { return proxy_report_; }
 
   ~QueryEngine();
 
@@ -99,7 +118,8 @@ class QueryEngine {
   // (query_engine.cpp).
   struct Scratch;
 
-  QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache);
+  QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
+              std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report);
 
   template <QueryKind kKind>
   Status run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
@@ -109,6 +129,8 @@ class QueryEngine {
 
   std::shared_ptr<const SceneStore> store_;
   std::unique_ptr<BrickCache> cache_;
+  std::unique_ptr<const ProxySet> proxies_;
+  ProxyOpenReport proxy_report_;
   std::mutex scratch_mutex_;  // taken twice per batch, never per ray
   std::vector<std::unique_ptr<Scratch>> free_scratch_;
 };
