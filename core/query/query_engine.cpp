@@ -163,6 +163,19 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const uint64_t ticks_start = ticks();
   uint64_t proxy_ticks = 0;
   const ProxySet* const proxies = proxies_.get();
+  // This batch's view of which bricks are resident. A proxy saves a load and
+  // a build, never tracing time (testing one costs about as much as tracing a
+  // small brick), so it is consulted only for bricks not known to be
+  // resident: a fully cached scene pays nothing for proxies. Skipping or not
+  // never changes an answer, so a stale view costs at most a load or a test.
+  // Written only between parallel phases.
+  std::vector<uint8_t> known_resident;
+  const auto refresh_known_resident = [&] {
+    if (proxies == nullptr || !options.reorder) return;
+    known_resident.assign(store_->brick_count(), 0);
+    for (const uint32_t b : cache_->resident_bricks()) known_resident[b] = 1;
+  };
+  refresh_known_resident();
   const CacheCounters counters_before = cache_->counters();
   const UpperHierarchy& upper = store_->manifest().upper;
   const std::size_t n = rays.size();
@@ -285,7 +298,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         p.last = key;
         p.next = 1;
       }
-      if (proxies == nullptr) return key.brick;
+      if (proxies == nullptr || (!known_resident.empty() && known_resident[key.brick])) return key.brick;
       ++counters.proxy_tests;
       const uint64_t t0 = ticks();
       const bool may_hit = proxies->brick(key.brick).may_hit(rays[i], rays[i].tnear, limit);
@@ -395,6 +408,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         for (std::size_t q = 0; q < resident_now.size(); ++q) {
           const uint32_t b = resident_now[q];
           is_waiting[b] = 0;
+          if (!known_resident.empty()) known_resident[b] = 1;
           wave_batches[q].swap(queues[b]);  // both keep their buffers
           queues[b].clear();
           stats.brick_visits += wave_batches[q].size();
@@ -459,6 +473,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       std::vector<uint32_t> batch = std::move(queues[brick]);
       queues[brick] = {};
 
+      refresh_known_resident();
       if (track_demand) {
         // Belady on the known part of the schedule: resident bricks ranked
         // by how many rays still need them (most first); those no ray needs
@@ -476,6 +491,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       }
       PinnedBrick pin;
       OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
+      if (!known_resident.empty()) known_resident[brick] = 1;
       const auto t_brick = Clock::now();
       const BrickAccel& accel = pin.accel();
       const std::size_t batch_chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
