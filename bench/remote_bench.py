@@ -89,8 +89,9 @@ def cpp_query(address, rays_path, out, runs):
 
 def trace_warm(store, rays_path, out, runs):
     stats_path = out + ".stats.json"
+    # The same budget as the server's, so the warm runs are fully cached too.
     run([OUTCORE, "trace", store, "--rays", rays_path, "-o", out, "--threads", "2", "--repeat", str(runs + 1),
-         "--stats-json", stats_path])
+         "--cache-mb", "8192", "--stats-json", stats_path])
     with open(stats_path) as f:
         stats = json.load(f)
     return statistics.median(s["seconds"]["total"] for s in stats[1:])
