@@ -153,6 +153,28 @@ TEST_F(ServerE2e, UnevenChunksKeepTheirOrder) {
   EXPECT_TRUE(contains(small, "messages 2\n")) << small;
 }
 
+// A batch of more than 262,144 rays is streamed in 65,536-ray chunks by
+// default even when one message would hold it (the wire then overlaps
+// tracing), against a server with the default 64 MiB messages.
+TEST_F(ServerE2e, LargeBatchesStreamInChunksByDefaultAndEqualTrace) {
+  std::string error;
+  auto server = ServerProcess::start(gen_->store, {}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto store = SceneStore::open(gen_->store);
+  ASSERT_TRUE(store.ok());
+  const std::string rays = dir_->file("gen-large.npy");
+  ASSERT_TRUE(write_rays_npy(rays, testing::make_test_rays((*store)->manifest().bounds, 300'001, 13)).ok());
+  const std::string traced = dir_->file("trace-large.npy");
+  const std::string queried = dir_->file("query-large.npy");
+  const SubprocessResult t = outcore({"trace", gen_->store, "--rays", rays, "-o", traced});
+  ASSERT_TRUE(t.succeeded()) << t.describe();
+  const SubprocessResult q =
+      outcore({"query", "--server", server->address(), "--rays", rays, "-o", queried, "--stats"});
+  ASSERT_TRUE(q.succeeded()) << q.describe();
+  EXPECT_TRUE(contains(q.stdout_text, "messages 5\n")) << q.stdout_text;  // ceil(300001 / 65536)
+  EXPECT_TRUE(read_bytes(queried) == read_bytes(traced)) << "query's hits differ from trace's";
+}
+
 TEST_F(ServerE2e, StrictAndNoReorderGiveTheSameAnswer) {
   expect_query_equals_trace(*gen_, gen_->small_rays, false,
                             {"--no-reorder", "--strict", "--deadline-s", "60"});

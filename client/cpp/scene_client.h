@@ -36,8 +36,10 @@ struct CallOptions {
   bool strict = false;
   // Ask the server to trace rays in input order (answers are identical).
   bool no_reorder = false;
-  // Rays per message; 0 picks the most the server's max message size allows.
-  // Batches up to one message go unary, larger ones are streamed.
+  // Rays per message; 0 picks the most the server's max message size allows,
+  // except that batches of more than 262,144 rays are streamed in chunks of
+  // at most 65,536 (the wire then overlaps tracing). Batches up to one
+  // message go unary, larger ones are streamed.
   uint64_t chunk_rays = 0;
 };
 
@@ -64,7 +66,8 @@ class SceneClient {
   Expected<v1::SceneInfo> scene_info(double deadline_seconds = 0);
   Expected<v1::ServerStats> stats(double deadline_seconds = 0);
 
-  // Rays per message used when CallOptions::chunk_rays is 0.
+  // The most rays one message holds (the chunk size for CallOptions::chunk_rays
+  // 0, capped at 65,536 for batches of more than 262,144 rays).
   uint64_t max_chunk_rays() const { return max_chunk_rays_; }
   const v1::SceneInfo& connected_scene() const { return scene_; }
 
