@@ -26,6 +26,7 @@
 #include "core/store/scene_store.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/test_paths.h"
+#include "tests/support/test_rays.h"
 
 namespace outcore {
 namespace {
@@ -197,32 +198,6 @@ std::size_t count_of(const std::string& text, const std::string& part) {
 
 // ---- the shared scene, rays and in-process answers ---------------------------------
 
-// Rays from around and inside the scene's box towards points in it, with
-// directions of varied length; every fourth has a limited [tnear, tfar].
-std::vector<Ray> make_rays(const Aabb& box, std::size_t n) {
-  std::mt19937 rng(1234);
-  std::uniform_real_distribution<float> unit(0.0f, 1.0f);
-  auto point = [&](float grow) {
-    const Vec3f e = box.extent();
-    return Vec3f(box.lo.x - grow * e.x + unit(rng) * (1 + 2 * grow) * e.x,
-                 box.lo.y - grow * e.y + unit(rng) * (1 + 2 * grow) * e.y,
-                 box.lo.z - grow * e.z + unit(rng) * (1 + 2 * grow) * e.z);
-  };
-  std::vector<Ray> rays(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    const Vec3f from = point(0.5f);
-    const Vec3f to = point(0.0f);
-    const float scale = 0.25f + 3.0f * unit(rng);
-    rays[i].origin = from;
-    rays[i].direction = Vec3f((to.x - from.x) * scale, (to.y - from.y) * scale, (to.z - from.z) * scale);
-    if (i % 4 == 3) {
-      rays[i].tnear = 0.2f * unit(rng);
-      rays[i].tfar = rays[i].tnear + 0.8f * unit(rng);
-    }
-  }
-  return rays;
-}
-
 std::vector<Hit> reference_hits(const std::string& store, const std::vector<Ray>& rays) {
   auto engine = QueryEngine::open(store, EngineOptions{});
   EXPECT_TRUE(engine.ok()) << engine.status().to_string();
@@ -267,7 +242,7 @@ class TraceCli : public ::testing::Test {
     auto store = SceneStore::open(store_);
     ASSERT_TRUE(store.ok()) << store.status().to_string();
     brick_count_ = (*store)->brick_count();
-    rays_ = new std::vector<Ray>(make_rays((*store)->manifest().bounds, kRayCount));
+    rays_ = new std::vector<Ray>(testing::make_test_rays((*store)->manifest().bounds, kRayCount, 1234));
     rays_path_ = dir_->file("rays.npy");
     ASSERT_TRUE(write_rays_npy(rays_path_, *rays_).ok());
     hits_ = new std::vector<Hit>(reference_hits(store_, *rays_));

@@ -13,6 +13,7 @@
 #include "core/proxy/proxy_file.h"
 #include "core/query/query_engine.h"
 #include "core/store/scene_packer.h"
+#include "tests/support/packed_scene.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -20,26 +21,10 @@ namespace {
 
 using testing::TempDir;
 
-struct Scene {
-  TempDir dir;
-  std::string path;
-  Aabb bounds;
-};
+using Scene = testing::PackedScene;
 
 std::unique_ptr<Scene> pack(const std::vector<std::string>& inputs, uint32_t brick_triangles) {
-  auto scene = std::make_unique<Scene>();
-  scene->path = scene->dir.file("scene");
-  PackOptions options;
-  options.inputs = inputs;
-  options.output = scene->path;
-  options.brick_triangles = brick_triangles;
-  options.sync = false;
-  const auto summary = pack_scene(options);
-  EXPECT_TRUE(summary.ok()) << summary.status().to_string();
-  auto store = SceneStore::open(scene->path);
-  EXPECT_TRUE(store.ok()) << store.status().to_string();
-  if (store.ok()) scene->bounds = (*store)->manifest().bounds;
-  return scene;
+  return testing::pack_test_scene(inputs, brick_triangles);
 }
 
 Vec3f random_in(std::mt19937_64& rng, const Aabb& box, float grow) {

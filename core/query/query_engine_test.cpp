@@ -11,6 +11,7 @@
 
 #include "core/query/brute_force_reference.h"
 #include "core/store/scene_packer.h"
+#include "tests/support/packed_scene.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -18,35 +19,10 @@ namespace {
 
 using testing::TempDir;
 
-// A packed scene plus every triangle with its ids, for the brute-force reference.
-struct PackedScene {
-  TempDir dir;
-  std::string path;
-  std::vector<Triangle> triangles;
-  std::vector<TriangleId> ids;
-  Aabb bounds;
-};
+using testing::PackedScene;
 
 std::unique_ptr<PackedScene> pack(const std::vector<std::string>& inputs, uint32_t brick_triangles) {
-  auto scene = std::make_unique<PackedScene>();
-  scene->path = scene->dir.file("scene");
-  PackOptions options;
-  options.inputs = inputs;
-  options.output = scene->path;
-  options.brick_triangles = brick_triangles;
-  options.sync = false;
-  const auto summary = pack_scene(options);
-  EXPECT_TRUE(summary.ok()) << summary.status().to_string();
-  auto store = SceneStore::open(scene->path);
-  EXPECT_TRUE(store.ok()) << store.status().to_string();
-  BrickData brick;
-  for (uint32_t b = 0; b < (*store)->brick_count(); ++b) {
-    EXPECT_TRUE((*store)->load_brick(b, brick).ok());
-    scene->triangles.insert(scene->triangles.end(), brick.triangles.begin(), brick.triangles.end());
-    scene->ids.insert(scene->ids.end(), brick.ids.begin(), brick.ids.end());
-  }
-  scene->bounds = (*store)->manifest().bounds;
-  return scene;
+  return testing::pack_test_scene(inputs, brick_triangles);
 }
 
 Vec3f random_in(std::mt19937_64& rng, const Aabb& box, float grow = 0.0f) {

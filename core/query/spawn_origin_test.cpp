@@ -8,7 +8,7 @@
 #include <vector>
 
 #include "core/query/query_engine.h"
-#include "core/store/scene_packer.h"
+#include "tests/support/packed_scene.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -38,18 +38,6 @@ const std::vector<Config>& configs() {
       {"bvh-double", "bvh", {{"triangle_test", "double"}}, true},
   };
   return all;
-}
-
-std::string pack_store(const TempDir& dir, const std::vector<std::string>& inputs, uint32_t brick_triangles) {
-  const std::string path = dir.file("scene");
-  PackOptions options;
-  options.inputs = inputs;
-  options.output = path;
-  options.brick_triangles = brick_triangles;
-  options.sync = false;
-  const auto summary = pack_scene(options);
-  EXPECT_TRUE(summary.ok()) << summary.status().to_string();
-  return path;
 }
 
 std::unique_ptr<QueryEngine> open_engine(const std::string& path, const Config& config) {
@@ -157,9 +145,8 @@ TEST_P(SpawnOriginEngine, SecondaryRaysNeverReHitTheirOwnTriangle) {
   };
   for (const auto& scene : scenes) {
     SCOPED_TRACE(config.name + " on " + scene.spec);
-    TempDir dir;
-    const std::string path = pack_store(dir, {scene.spec}, 512);
-    auto engine = open_engine(path, config);
+    const auto packed = testing::pack_test_scene({scene.spec}, 512);
+    auto engine = open_engine(packed->path, config);
     ASSERT_NE(engine, nullptr);
     const auto rays = primary_rays(scene.centre, scene.radius, kRays, 7);
     const auto hits = trace(*engine, rays);
@@ -242,8 +229,8 @@ TEST_P(SpawnOriginEngine, NearNeighbourIsNotSkipped) {
         std::fprintf(f, "f 1 2 3\nf 1 3 4\nf 5 7 6\nf 5 8 7\n");
         std::fclose(f);
       }
-      const std::string path = pack_store(dir, {obj}, 64);
-      auto engine = open_engine(path, config);
+      const auto packed = testing::pack_test_scene({obj}, 64);
+      auto engine = open_engine(packed->path, config);
       ASSERT_NE(engine, nullptr);
       std::mt19937_64 rng(3);
       std::uniform_real_distribution<double> u(0.05, 0.95);

@@ -14,39 +14,16 @@
 #include "core/query/brute_force_reference.h"
 #include "core/query/query_engine.h"
 #include "core/store/scene_packer.h"
+#include "tests/support/packed_scene.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
 namespace {
 
-struct Packed {
-  testing::TempDir dir;
-  std::string path;
-  std::vector<Triangle> triangles;
-  std::vector<TriangleId> ids;
-  Aabb bounds;
-};
+using Packed = testing::PackedScene;
 
 std::unique_ptr<Packed> pack(const std::vector<std::string>& inputs, uint32_t brick_triangles) {
-  auto scene = std::make_unique<Packed>();
-  scene->path = scene->dir.file("scene");
-  PackOptions options;
-  options.inputs = inputs;
-  options.output = scene->path;
-  options.brick_triangles = brick_triangles;
-  options.sync = false;
-  const auto summary = pack_scene(options);
-  EXPECT_TRUE(summary.ok()) << summary.status().to_string();
-  auto store = SceneStore::open(scene->path);
-  EXPECT_TRUE(store.ok()) << store.status().to_string();
-  BrickData brick;
-  for (uint32_t b = 0; b < (*store)->brick_count(); ++b) {
-    EXPECT_TRUE((*store)->load_brick(b, brick).ok());
-    scene->triangles.insert(scene->triangles.end(), brick.triangles.begin(), brick.triangles.end());
-    scene->ids.insert(scene->ids.end(), brick.ids.begin(), brick.ids.end());
-  }
-  scene->bounds = (*store)->manifest().bounds;
-  return scene;
+  return testing::pack_test_scene(inputs, brick_triangles);
 }
 
 std::vector<Ray> mixed_rays(const Aabb& box, std::size_t n, uint64_t seed) {
