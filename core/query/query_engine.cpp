@@ -170,12 +170,14 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // never changes an answer, so a stale view costs at most a load or a test.
   // Written only between parallel phases.
   std::vector<uint8_t> known_resident;
-  const auto refresh_known_resident = [&] {
-    if (proxies == nullptr || !options.reorder) return;
-    known_resident.assign(store_->brick_count(), 0);
-    for (const uint32_t b : cache_->resident_bricks()) known_resident[b] = 1;
+  const auto mark_known_resident = [&](const std::vector<uint32_t>& resident) {
+    std::fill(known_resident.begin(), known_resident.end(), uint8_t{0});
+    for (const uint32_t b : resident) known_resident[b] = 1;
   };
-  refresh_known_resident();
+  if (proxies != nullptr && options.reorder) {
+    known_resident.assign(store_->brick_count(), 0);
+    mark_known_resident(cache_->resident_bricks());
+  }
   const CacheCounters counters_before = cache_->counters();
   const UpperHierarchy& upper = store_->manifest().upper;
   const std::size_t n = rays.size();
@@ -473,21 +475,26 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       std::vector<uint32_t> batch = std::move(queues[brick]);
       queues[brick] = {};
 
-      refresh_known_resident();
-      if (track_demand) {
-        // Belady on the known part of the schedule: resident bricks ranked
-        // by how many rays still need them (most first); those no ray needs
-        // are left out, and the policy evicts them first.
-        schedule_hint.clear();
-        for (const uint32_t b : cache_->resident_bricks()) {
-          if (demand[b].load(std::memory_order_relaxed) > 0) schedule_hint.push_back(b);
+      // One look at what is resident serves both the proxies' view and the
+      // schedule hint.
+      if (!known_resident.empty() || track_demand) {
+        const std::vector<uint32_t> resident = cache_->resident_bricks();
+        if (!known_resident.empty()) mark_known_resident(resident);
+        if (track_demand) {
+          // Belady on the known part of the schedule: resident bricks ranked
+          // by how many rays still need them (most first); those no ray needs
+          // are left out, and the policy evicts them first.
+          schedule_hint.clear();
+          for (const uint32_t b : resident) {
+            if (demand[b].load(std::memory_order_relaxed) > 0) schedule_hint.push_back(b);
+          }
+          std::sort(schedule_hint.begin(), schedule_hint.end(), [&](uint32_t a, uint32_t b) {
+            const uint32_t da = demand[a].load(std::memory_order_relaxed),
+                           db = demand[b].load(std::memory_order_relaxed);
+            return da != db ? da > db : a < b;
+          });
+          cache_->hint_schedule(schedule_hint);
         }
-        std::sort(schedule_hint.begin(), schedule_hint.end(), [&](uint32_t a, uint32_t b) {
-          const uint32_t da = demand[a].load(std::memory_order_relaxed),
-                         db = demand[b].load(std::memory_order_relaxed);
-          return da != db ? da > db : a < b;
-        });
-        cache_->hint_schedule(schedule_hint);
       }
       PinnedBrick pin;
       OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
