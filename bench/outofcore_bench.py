@@ -15,14 +15,20 @@ Steps:
 5. OPT: `outcore cache-sim` of the LRU trace at the same budget (Belady,
    size-aware) — the fewest builds any policy could have had on that request
    sequence; each policy's builds are reported against it;
-6. reorder off (`--no-reorder`) for LRU at each budget on the first
+6. trace-ahead off (`--no-trace-ahead`) for LRU at each budget below 1;
+7. reorder off (`--no-reorder`) for LRU at each budget on a random subset of
    --noreorder-rays rays (rays one by one: far slower, so a subset).
+
+Throughput is given two ways: cold (one batch from an empty cache: a scene
+larger than memory served once) and warm (the second batch: steady state
+under that budget), each against the unlimited run's cold and warm.
 
 Every answer is compared with the unlimited run's hits file: any difference
 is reported (there must be none).
 
 Usage: .venv/bin/python bench/outofcore_bench.py [--copies 400] [--rays 1000000]
        [--fractions 0.0625,0.125,0.25,0.5,1] [--policies all] [--kinds incoherent,camera]
+       [--no-compare-trace-ahead]
        [--outcore build/client/outcore] [--work build/bench-ooc] [--json rows.json]
 """
 import argparse
@@ -87,6 +93,7 @@ def main():
     ap.add_argument("--work", default=os.path.join(ROOT, "build", "bench-ooc"))
     ap.add_argument("--outcore", default=OUTCORE)
     ap.add_argument("--json")
+    ap.add_argument("--no-compare-trace-ahead", action="store_true")
     a = ap.parse_args()
     OUTCORE = os.path.abspath(a.outcore)
     policies = POLICIES if a.policies == "all" else a.policies.split(",")
@@ -117,7 +124,10 @@ def main():
         rows.append(unlimited)
         print(json.dumps(unlimited), flush=True)
         subset = os.path.join(a.work, f"{kind}-subset.npy")
-        np.save(subset, np.load(rays)[: a.noreorder_rays])
+        # A random subset: the first rays of a camera batch are one corner of
+        # the image (which may miss everything).
+        picked = np.sort(np.random.default_rng(7).choice(a.rays, size=min(a.rays, a.noreorder_rays), replace=False))
+        np.save(subset, np.load(rays)[picked])
         for fraction in fractions:
             budget_mib = max(1, int(built * fraction / 2**20))
             lru_trace = os.path.join(a.work, f"{kind}-{fraction}-lru.csv")
@@ -127,7 +137,7 @@ def main():
                                    trace_out=lru_trace if policy == "lru" else None)
                 row = dict(kind=kind, fraction=fraction, policy=policy, budget_mib=budget_mib,
                            builds_cold=stats[0]["brick_builds"], builds_warm=stats[1]["brick_builds"],
-                                                      seconds_cold=stats[0]["seconds"]["total"], seconds_warm=stats[1]["seconds"]["total"],
+                           seconds_cold=stats[0]["seconds"]["total"], seconds_warm=stats[1]["seconds"]["total"],
                            peak_accounted_mib=max(s["peak_bytes_resident"] for s in stats) / 2**20,
                            peak_rss_mib=rss, same_answers=same_file(out, ref_out))
                 rows.append(row)
@@ -139,19 +149,29 @@ def main():
                              budget_mib=budget_mib, builds_total=opt["misses"],
                              bytes_built_mib=opt["bytes_built"] / 2**20))
             print(json.dumps(rows[-1]), flush=True)
+            if fraction < 1 and not a.no_compare_trace_ahead:
+                out = os.path.join(a.work, f"{kind}-{fraction}-noahead.npy")
+                stats, rss = trace(store, rays, out, budget_mib, "lru", extra=["--no-trace-ahead"])
+                rows.append(dict(kind=kind, fraction=fraction, policy="lru --no-trace-ahead", budget_mib=budget_mib,
+                                 builds_cold=stats[0]["brick_builds"], builds_warm=stats[1]["brick_builds"],
+                                 seconds_cold=stats[0]["seconds"]["total"],
+                                 seconds_warm=stats[1]["seconds"]["total"],
+                                 peak_accounted_mib=max(s["peak_bytes_resident"] for s in stats) / 2**20,
+                                 peak_rss_mib=rss, same_answers=same_file(out, ref_out)))
+                print(json.dumps(rows[-1]), flush=True)
             out = os.path.join(a.work, f"{kind}-{fraction}-noreorder.npy")
             stats, rss = trace(store, subset, out, budget_mib, "lru", extra=["--no-reorder"])
             rows.append(dict(kind=kind, fraction=fraction, policy="lru --no-reorder", rays=a.noreorder_rays,
                              budget_mib=budget_mib, builds_cold=stats[0]["brick_builds"],
                              builds_warm=stats[1]["brick_builds"], seconds_cold=stats[0]["seconds"]["total"],
                              seconds_warm=stats[1]["seconds"]["total"], peak_rss_mib=rss,
-                             same_answers=np.load(out).tobytes() == np.load(ref_out)[: a.noreorder_rays].tobytes()))
+                             same_answers=np.load(out).tobytes() == np.load(ref_out)[picked].tobytes()))
             print(json.dumps(rows[-1]), flush=True)
     print(f"\nscene {spec}: {info['triangles']:,} triangles, {info['bricks']} bricks; load average "
           f"{load_before:.1f} before, {os.getloadavg()[0]:.1f} after, {os.cpu_count()} cores")
-    print("\n| rays | budget | policy | builds (cold + warm) | vs OPT | warm M rays/s | warm vs unlimited "
-          "| peak accounted MiB | peak RSS MiB | answers = unlimited |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| rays | budget | policy | builds (cold + warm) | vs OPT | cold M rays/s | cold vs unlimited "
+          "| warm M rays/s | warm vs unlimited | peak accounted MiB | peak RSS MiB | answers = unlimited |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     by_key = {}
     for r in rows:
         by_key[(r["kind"], r["fraction"], r["policy"])] = r
@@ -164,10 +184,12 @@ def main():
         builds = r["builds_cold"] + r["builds_warm"]
         opt = by_key.get((kind, frac, "opt (replay of the lru trace)"))
         vs_opt = f"{builds / opt['builds_total']:.2f}x" if opt and "rays" not in r else ""
+        cold = n / r["seconds_cold"] / 1e6
         warm = n / r["seconds_warm"] / 1e6
+        vs_cold = "" if "rays" in r else f"{unl['seconds_cold'] / r['seconds_cold']:.2f}x"
         vs = "" if "rays" in r else f"{unl['seconds_warm'] / r['seconds_warm']:.2f}x"
         budget = "unlimited" if frac == "unlimited" else f"{frac:g} ({r['budget_mib']} MiB)"
-        print(f"| {kind} | {budget} | {r['policy']} | {builds} | {vs_opt} | {warm:.2f} | {vs} | "
+        print(f"| {kind} | {budget} | {r['policy']} | {builds} | {vs_opt} | {cold:.2f} | {vs_cold} | {warm:.2f} | {vs} | "
               f"{r.get('peak_accounted_mib', float('nan')):.0f} | {r['peak_rss_mib']:.0f} | "
               f"{'yes' if r.get('same_answers', True) else 'NO'} |")
     for r in rows:

@@ -29,6 +29,7 @@ struct TraceArgs {
   std::string triangle_test;  // shorthand for --accel-opt triangle_test=NAME (bvh only)
   bool reference = false;     // float64 ground truth: brick structure "reference"
   bool no_reorder = false;
+  bool no_trace_ahead = false;
   bool no_proxies = false;
   std::optional<int64_t> proxy_res;  // unset: the default resolution
   int threads = 0;
@@ -129,6 +130,7 @@ int run_trace(const TraceArgs& args) {
 
   QueryOptions query_options;
   query_options.reorder = !args.no_reorder;
+  query_options.trace_ahead = !args.no_trace_ahead;
   query_options.strict = args.strict;
   // Repeats run the same batch again on the now warm cache (the first run is
   // the cold one: time to first hit); the output is the last run's.
@@ -195,6 +197,9 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--reference", args->reference,
                 "Ground truth: float64 brute force per brick (watertight, slow) on the same store");
   cmd->add_flag("--no-reorder", args->no_reorder, "Trace rays one by one in input order (for comparison)");
+  cmd->add_flag("--no-trace-ahead", args->no_trace_ahead,
+                "Under a budget smaller than the scene, do not trace rays at a brick being built before they "
+                "reach it (for comparison; answers are the same)");
   cmd->add_flag("--no-proxies", args->no_proxies,
                 "Do not skip bricks by their occupancy proxies (for comparison; answers are the same)");
   cmd->add_option("--proxy-res", args->proxy_res,

@@ -1,6 +1,8 @@
 #include "core/query/query_engine.h"
 
+#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 #if defined(__x86_64__) || defined(__i386__)
 #include <x86intrin.h>
 #endif
@@ -39,9 +41,13 @@ struct AdvanceCounters {
   uint64_t proxy_tests = 0;
   uint64_t skipped = 0;
   uint64_t proxy_ticks = 0;
+  uint64_t ahead_visits = 0;  // visits whose tracing was done ahead of time
+  uint64_t ahead_traces = 0;
 
   void add_to(QueryStats& stats) const {
     stats.upper_nodes_visited += nodes;
+    stats.brick_visits += ahead_visits;
+    stats.rays_traced_ahead += ahead_traces;
     stats.proxy_tests += proxy_tests;
     stats.bricks_skipped_by_proxy += skipped;
   }
@@ -54,6 +60,14 @@ constexpr std::size_t kRayGrain = 512;
 // Rays per task when validating a batch.
 constexpr std::size_t kCheckGrain = 16384;
 
+// What is known of a window entry the ray has not reached yet: nothing, or
+// the outcome of tracing it there ahead of its turn (trace-ahead, below);
+// values from kAheadHitBase on index the batch's table of such hits.
+constexpr uint32_t kAheadNone = 0;
+constexpr uint32_t kAheadSkip = 1;    // its proxy says the ray cannot hit it
+constexpr uint32_t kAheadNoGain = 2;  // traced: nothing beats what the ray had then
+constexpr uint32_t kAheadHitBase = 3;
+
 struct RayProgress {
   std::array<BrickKey, kWindow> window;
   BrickKey last;  // the key of the brick being (or last) traced
@@ -62,6 +76,8 @@ struct RayProgress {
   // The last fill found fewer than kWindow bricks: the window holds every
   // brick left (horizons only shrink), so no refill is needed.
   bool complete = false;
+  // Window entries already listed at their brick for trace-ahead (bit k).
+  uint8_t listed = 0;
 };
 
 // Batches up to this many rays give their scratch back for reuse (about 50
@@ -82,14 +98,27 @@ struct QueryEngine::Scratch {
   std::vector<uint32_t> first;
   std::vector<std::vector<uint32_t>> queues;
   std::vector<std::vector<uint32_t>> wave_batches;
+  // Trace-ahead: per brick, rays with it further on in their window; and the
+  // hits found ahead of their turn.
+  std::vector<std::vector<uint32_t>> upcoming;
+  // kAhead* per ray and window entry (apart from RayProgress, which stays
+  // small for batches that fit the cache).
+  std::vector<std::array<uint32_t, kWindow>> ahead_state;
+  std::vector<Hit> ahead_hits;
+  std::vector<Ray> ahead_ray_copies;
+  std::vector<Hit> ahead_hit_copies;
+  std::vector<uint8_t> ahead_occluded;
+  std::vector<uint32_t> ahead_outcomes;
 };
 
 QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
-                         std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report)
+                         std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report,
+                         bool cache_fits_scene)
     : store_(std::move(store)),
       cache_(std::move(cache)),
       proxies_(std::move(proxies)),
-      proxy_report_(std::move(proxy_report)) {}
+      proxy_report_(std::move(proxy_report)),
+      cache_fits_scene_(cache_fits_scene) {}
 
 QueryEngine::~QueryEngine() = default;
 
@@ -137,11 +166,18 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   if (options.proxies) {
     OUTCORE_ASSIGN_OR_RETURN(proxies, ProxySet::open(*store, options.proxy_config, &proxy_report));
   }
+  // Whether the budget holds every brick at once (by the builder's
+  // reservations, which bound what a brick holds): then nothing is ever
+  // evicted and trace-ahead has nothing to save.
+  uint64_t reserved = 0;
+  for (const BrickRecord& brick : store->manifest().bricks)
+    reserved += builder->reserve_bytes(brick.triangle_count);
+  const bool cache_fits_scene = reserved <= options.cache_bytes;
   auto cache =
       std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
   if (options.access_trace) cache->set_access_trace(options.access_trace);
-  return std::unique_ptr<QueryEngine>(
-      new QueryEngine(std::move(store), std::move(cache), std::move(proxies), std::move(proxy_report)));
+  return std::unique_ptr<QueryEngine>(new QueryEngine(std::move(store), std::move(cache), std::move(proxies),
+                                                      std::move(proxy_report), cache_fits_scene));
 }
 
 Status QueryEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits, const QueryOptions& options,
@@ -257,29 +293,44 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // relaxed atomic per window entry and one per traced chunk.
   const bool track_demand = options.reorder && cache_->wants_schedule_hint();
   std::vector<std::atomic<uint32_t>> demand(track_demand ? store_->brick_count() : 0);
-  auto drop_window = [&](RayProgress& p) {
+  // Trace-ahead (below) is possible only when the budget cannot hold the scene.
+  const bool ahead_possible = options.reorder && options.trace_ahead && !cache_fits_scene_;
+  std::vector<std::array<uint32_t, kWindow>>& ahead_state = scratch->ahead_state;
+  if (ahead_possible && ahead_state.size() < n) ahead_state.resize(n);
+  // Entries traced ahead already gave their demand back (trace_ahead below).
+  auto drop_window = [&](std::size_t i) {
     if (!track_demand) return;
-    for (; p.next < p.count; ++p.next) demand[p.window[p.next].brick].fetch_sub(1, std::memory_order_relaxed);
+    RayProgress& p = progress[i];
+    for (; p.next < p.count; ++p.next) {
+      if (!ahead_possible || ahead_state[i][p.next] == kAheadNone)
+        demand[p.window[p.next].brick].fetch_sub(1, std::memory_order_relaxed);
+    }
   };
+  std::vector<Hit>& ahead_hits = scratch->ahead_hits;
+  ahead_hits.clear();
   // Moves ray i past its current brick; returns the next brick or kInvalidId.
   // A brick whose proxy the ray's remaining segment cannot hit is passed over
   // like a traced brick without a hit (it has none to give), so the ray's
-  // hit, horizon and brick order are what they are with proxies off.
+  // hit, horizon and brick order are what they are with proxies off. A brick
+  // the ray was traced against ahead of its turn is passed over too, its hit
+  // (if any) taken now: the visit happens, only earlier.
   auto advance = [&](std::size_t i, AdvanceCounters& counters) -> uint32_t {
     RayProgress& p = progress[i];
-    if (finished(i)) {
-      drop_window(p);
-      return kInvalidId;
-    }
-    const float limit = horizon(i);
+    float limit = horizon(i);
     for (;;) {
+      if (finished(i)) {
+        drop_window(i);
+        return kInvalidId;
+      }
       BrickKey key;
+      uint32_t ahead = kAheadNone;
       if (p.next < p.count) {
         key = p.window[p.next];
         if (key.entry > limit) {
-          drop_window(p);
+          drop_window(i);
           return kInvalidId;
         }
+        if (ahead_possible) ahead = ahead_state[i][p.next];
         p.last = key;
         ++p.next;
       } else {
@@ -291,6 +342,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
                 : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, counters.nodes));
         p.complete = p.count < kWindow;
         p.next = 0;
+        if (ahead_possible) ahead_state[i] = {};
+        p.listed = 0;
         if (track_demand) {
           for (uint8_t k = 0; k < p.count; ++k)
             demand[p.window[k].brick].fetch_add(1, std::memory_order_relaxed);
@@ -299,6 +352,21 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         key = p.window[0];
         p.last = key;
         p.next = 1;
+      }
+      if (ahead != kAheadNone) {
+        if (ahead == kAheadSkip) {
+          ++counters.skipped;
+          continue;
+        }
+        ++counters.ahead_visits;
+        if constexpr (kKind == QueryKind::kClosestHit) {
+          if (ahead >= kAheadHitBase) {
+            const Hit& found = ahead_hits[ahead - kAheadHitBase];
+            if (hit_is_better(found.t, found.geometry_id, found.primitive_id, hits[i])) hits[i] = found;
+            limit = horizon(i);
+          }
+        }
+        continue;
       }
       if (proxies == nullptr || (!known_resident.empty() && known_resident[key.brick])) return key.brick;
       ++counters.proxy_tests;
@@ -347,12 +415,164 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     for (auto& queue : queues) queue.clear();  // a failed batch may have left rays
     std::vector<uint32_t> waiting;             // bricks with a non-empty queue
     std::vector<uint8_t> is_waiting(brick_count, 0);
+    // Trace-ahead: under a budget that cannot hold the scene, a brick built
+    // for its queue may be evicted before the rays that reach it later (those
+    // with it further on in their window) get there, and be built again. So
+    // when a build may evict, the rays with the brick further on are traced
+    // against it too, while it is pinned, and the outcome is kept for when
+    // they get there (RayProgress::ahead). A closest hit found ahead is taken
+    // only when the ray reaches the brick, by hit_is_better(), which is what
+    // tracing it then would give (the brick's best hit does not depend on how
+    // far the ray was clipped when it was traced), so answers stay bitwise
+    // the same; an any-hit found ahead finishes the ray at once (occlusion is
+    // an OR over bricks).
+    std::vector<std::vector<uint32_t>>& upcoming = scratch->upcoming;
+    if (ahead_possible) {
+      if (upcoming.size() < brick_count) upcoming.resize(brick_count);
+      for (auto& list : upcoming) list.clear();
+    }
+    auto list_upcoming = [&](uint32_t ray) {
+      RayProgress& p = progress[ray];
+      for (uint8_t k = p.next; k < p.count; ++k) {
+        if (p.listed & (1u << k)) continue;
+        p.listed |= static_cast<uint8_t>(1u << k);
+        upcoming[p.window[k].brick].push_back(ray);
+      }
+    };
     auto enqueue = [&](uint32_t brick, uint32_t ray) {
       queues[brick].push_back(ray);
       if (!is_waiting[brick]) {
         is_waiting[brick] = 1;
         waiting.push_back(brick);
       }
+      if (ahead_possible) list_upcoming(ray);
+    };
+    // Trace-ahead candidates of the bricks being built (concatenated), their
+    // window entries, and the outcomes.
+    std::vector<uint32_t> ahead_rays;
+    std::vector<uint8_t> ahead_slots;
+    std::vector<AdvanceCounters> ahead_counters;
+    // Appends the rays listed at `brick` that have not reached it yet (one
+    // per (ray, entry) however often it was listed; not those beyond their
+    // horizon, which will never reach it) and marks their entries taken.
+    // Rays whose current brick is in `busy` are left out: they are being
+    // traced there at the same time.
+    auto select_ahead = [&](uint32_t brick, std::span<const uint32_t> busy) {
+      for (const uint32_t ray : upcoming[brick]) {
+        RayProgress& p = progress[ray];
+        if (finished(ray)) continue;
+        if (std::find(busy.begin(), busy.end(), p.last.brick) != busy.end()) continue;
+        for (uint8_t k = p.next; k < p.count; ++k) {
+          if (p.window[k].brick != brick) continue;
+          if (ahead_state[ray][k] == kAheadNone && p.window[k].entry <= horizon(ray)) {
+            ahead_state[ray][k] = kAheadNoGain;
+            ahead_rays.push_back(ray);
+            ahead_slots.push_back(k);
+          }
+          break;
+        }
+      }
+      upcoming[brick].clear();
+    };
+    auto reserve_ahead = [&](std::size_t m) {
+      if (scratch->ahead_ray_copies.size() < m) scratch->ahead_ray_copies.resize(m);
+      if (scratch->ahead_outcomes.size() < m) scratch->ahead_outcomes.resize(m);
+      if constexpr (kKind == QueryKind::kClosestHit) {
+        if (scratch->ahead_hit_copies.size() < m) scratch->ahead_hit_copies.resize(m);
+      } else {
+        if (scratch->ahead_occluded.size() < m) scratch->ahead_occluded.resize(m);
+      }
+    };
+    // Traces candidates [begin, end) against `brick` on copies of their rays
+    // and hits (the rays themselves are not at the brick yet); writes only
+    // those copies and the outcomes.
+    auto trace_ahead_range = [&](uint32_t brick, const BrickAccel& accel, std::size_t begin, std::size_t end,
+                                 AdvanceCounters& counters) {
+      Ray* const ray_copies = scratch->ahead_ray_copies.data();
+      Hit* const hit_copies = scratch->ahead_hit_copies.data();
+      uint8_t* const occluded_copies = scratch->ahead_occluded.data();
+      uint32_t* const outcomes = scratch->ahead_outcomes.data();
+      for (std::size_t from = begin; from < end; from += kRayGrain) {
+        uint32_t ids[kRayGrain];
+        std::size_t traced = 0;
+        for (std::size_t j = from; j < std::min(end, from + kRayGrain); ++j) {
+          const uint32_t ray = ahead_rays[j];
+          if (proxies != nullptr) {
+            ++counters.proxy_tests;
+            const uint64_t t0 = ticks();
+            const bool may_hit = proxies->brick(brick).may_hit(rays[ray], rays[ray].tnear, horizon(ray));
+            counters.proxy_ticks += ticks() - t0;
+            if (!may_hit) {
+              outcomes[j] = kAheadSkip;
+              continue;
+            }
+          }
+          outcomes[j] = kAheadNoGain;
+          ray_copies[j] = rays[ray];
+          if constexpr (kKind == QueryKind::kClosestHit) {
+            hit_copies[j] = hits[ray];
+          } else {
+            occluded_copies[j] = 0;
+          }
+          ids[traced++] = static_cast<uint32_t>(j);
+        }
+        const std::span<const uint32_t> traced_ids(ids, traced);
+        if constexpr (kKind == QueryKind::kClosestHit) {
+          accel.intersect(traced_ids, ray_copies, hit_copies);
+          for (const uint32_t j : traced_ids) {
+            const Hit& found = hit_copies[j];
+            if (hit_is_better(found.t, found.geometry_id, found.primitive_id, hits[ahead_rays[j]]))
+              outcomes[j] = kAheadHitBase;
+          }
+        } else {
+          accel.occluded(traced_ids, ray_copies, occluded_copies);
+          for (const uint32_t j : traced_ids) {
+            if (occluded_copies[j] != 0) outcomes[j] = kAheadHitBase;
+          }
+        }
+        counters.ahead_traces += traced;
+      }
+    };
+    // Files the outcomes in the rays' windows (serially: hits found ahead go
+    // to one table). An occlusion found ahead finishes its ray now.
+    auto file_ahead = [&]() {
+      const uint32_t* const outcomes = scratch->ahead_outcomes.data();
+      for (std::size_t j = 0; j < ahead_rays.size(); ++j) {
+        const uint32_t ray = ahead_rays[j];
+        uint32_t outcome = outcomes[j];
+        if (outcome == kAheadHitBase) {
+          if constexpr (kKind == QueryKind::kClosestHit) {
+            outcome = kAheadHitBase + static_cast<uint32_t>(ahead_hits.size());
+            ahead_hits.push_back(scratch->ahead_hit_copies[j]);
+          } else {
+            occluded[ray] = 1;
+            outcome = kAheadNoGain;
+          }
+        }
+        const RayProgress& p = progress[ray];
+        if (track_demand) demand[p.window[ahead_slots[j]].brick].fetch_sub(1, std::memory_order_relaxed);
+        ahead_state[ray][ahead_slots[j]] = outcome;
+      }
+      for (const AdvanceCounters& counters : ahead_counters) {
+        counters.add_to(stats);
+        proxy_ticks += counters.proxy_ticks;
+      }
+      ahead_rays.clear();
+      ahead_slots.clear();
+    };
+    // Trace-ahead at one pinned brick, in parallel chunks.
+    auto trace_ahead = [&](uint32_t brick, const BrickAccel& accel) {
+      select_ahead(brick, {});
+      const std::size_t m = ahead_rays.size();
+      reserve_ahead(m);
+      const std::size_t ahead_chunks = (m + kRayGrain - 1) / kRayGrain;
+      ahead_counters.assign(ahead_chunks, AdvanceCounters{});
+      tbb::this_task_arena::isolate([&] {
+        tbb::parallel_for(std::size_t{0}, ahead_chunks, [&](std::size_t c) {
+          trace_ahead_range(brick, accel, c * kRayGrain, std::min(m, (c + 1) * kRayGrain), ahead_counters[c]);
+        });
+      });
+      file_ahead();
     };
 
     // First brick of every ray, in parallel; per-chunk results merged in order.
@@ -392,6 +612,21 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     std::vector<std::vector<uint32_t>>& wave_batches = scratch->wave_batches;
     std::vector<uint32_t> resident_now, not_resident;
     std::vector<uint32_t> schedule_hint;
+    // Bricks built at once when nothing waiting is resident, one task each.
+    struct BuildTask {
+      AdvanceCounters counters;
+      double build_seconds = 0;
+      double seconds = 0;  // the whole task
+      bool was_hit = false;
+      Status status;
+    };
+    const std::size_t build_slots = static_cast<std::size_t>(
+        std::max(1, std::min<int>(tbb::this_task_arena::max_concurrency(),
+                                  static_cast<int>(tbb::global_control::active_value(
+                                      tbb::global_control::max_allowed_parallelism)))));
+    std::vector<uint32_t> building;
+    std::vector<BuildTask> build_tasks;
+    std::vector<std::size_t> ahead_begin;
     while (!waiting.empty()) {
       // Wave: every waiting brick that is resident now is traced at once, in
       // parallel over (brick, chunk) tasks — no build to wait for, and with
@@ -458,22 +693,42 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
           ++(task.was_hit ? stats.cache_hits : stats.cache_misses);
           for (const auto& [next, ray] : moved[t]) enqueue(next, ray);
         }
+        // Once the cache has had to evict, a resident brick may be gone when
+        // the rays with it further on get there: they are traced now.
+        if (ahead_possible && cache_->counters().evictions > counters_before.evictions) {
+          for (const uint32_t b : resident_now) {
+            if (upcoming[b].empty()) continue;
+            PinnedBrick pin;
+            OUTCORE_RETURN_IF_ERROR(acquire(b, pin));
+            trace_ahead(b, pin.accel());
+          }
+        }
         stats.seconds_brick += seconds_since(t_brick);
         continue;
       }
 
-      // Nothing waiting is resident: build the longest queue's brick, then
-      // trace its rays in parallel chunks.
-      std::size_t best = 0;
-      for (std::size_t k = 1; k < waiting.size(); ++k) {
-        if (queues[waiting[k]].size() > queues[waiting[best]].size()) best = k;
+      // Nothing waiting is resident: build the bricks with the longest
+      // queues, as many at once as there are threads (a brick's load and
+      // build are mostly serial, so one build at a time would leave cores
+      // idle), then trace their rays.
+      const std::size_t want = std::min<std::size_t>(build_slots, waiting.size());
+      std::partial_sort(waiting.begin(), waiting.begin() + static_cast<std::ptrdiff_t>(want), waiting.end(),
+                        [&](uint32_t a, uint32_t b) {
+                          const std::size_t qa = queues[a].size(), qb = queues[b].size();
+                          return qa != qb ? qa > qb : a < b;
+                        });
+      building.assign(waiting.begin(), waiting.begin() + static_cast<std::ptrdiff_t>(want));
+      waiting.erase(waiting.begin(), waiting.begin() + static_cast<std::ptrdiff_t>(want));
+      if (wave_batches.size() < want) wave_batches.resize(want);
+      uint64_t building_reserve = 0;
+      for (std::size_t q = 0; q < want; ++q) {
+        const uint32_t b = building[q];
+        is_waiting[b] = 0;
+        wave_batches[q].swap(queues[b]);
+        queues[b].clear();
+        stats.brick_visits += wave_batches[q].size();
+        building_reserve += cache_->builder().reserve_bytes(store_->manifest().bricks[b].triangle_count);
       }
-      const uint32_t brick = waiting[best];
-      waiting[best] = waiting.back();
-      waiting.pop_back();
-      is_waiting[brick] = 0;
-      std::vector<uint32_t> batch = std::move(queues[brick]);
-      queues[brick] = {};
 
       // One look at what is resident serves both the proxies' view and the
       // schedule hint.
@@ -496,36 +751,116 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
           cache_->hint_schedule(schedule_hint);
         }
       }
-      PinnedBrick pin;
-      OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
-      if (!known_resident.empty()) known_resident[brick] = 1;
-      const auto t_brick = Clock::now();
-      const BrickAccel& accel = pin.accel();
-      const std::size_t batch_chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
-      moved.resize(std::max(moved.size(), batch_chunks));
-      chunk_counters.assign(batch_chunks, AdvanceCounters{});
-      tbb::parallel_for(std::size_t{0}, batch_chunks, [&](std::size_t c) {
-        const std::size_t begin = c * kRayGrain, end = std::min(batch.size(), begin + kRayGrain);
-        const std::span<const uint32_t> ids(batch.data() + begin, end - begin);
-        moved[c].clear();
-        trace(accel, ids);
-        if (track_demand)
-          demand[brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
-        AdvanceCounters counters;
-        for (const uint32_t ray : ids) {
-          const uint32_t next = advance(ray, counters);
-          if (next != kInvalidId) moved[c].emplace_back(next, ray);
-        }
-        chunk_counters[c] = counters;
-      });
-      pin.release();
-      stats.brick_visits += batch.size();
-      for (std::size_t c = 0; c < batch_chunks; ++c) {
-        chunk_counters[c].add_to(stats);
-        proxy_ticks += chunk_counters[c].proxy_ticks;
-        for (const auto& [next, ray] : moved[c]) enqueue(next, ray);
+      // Builds that may evict: the cache is full or has evicted during this
+      // batch.
+      bool ahead_now = false;
+      if (ahead_possible) {
+        const CacheCounters now = cache_->counters();
+        ahead_now = now.evictions > counters_before.evictions ||
+                    now.resident_bytes + building_reserve > cache_->budget_bytes();
       }
-      stats.seconds_brick += seconds_since(t_brick);
+      const auto t_brick = Clock::now();
+
+      if (want == 1) {
+        // One brick: its rays are traced in parallel chunks.
+        const uint32_t brick = building[0];
+        const std::vector<uint32_t>& batch = wave_batches[0];
+        PinnedBrick pin;
+        OUTCORE_RETURN_IF_ERROR(acquire(brick, pin));
+        if (!known_resident.empty()) known_resident[brick] = 1;
+        const BrickAccel& accel = pin.accel();
+        const std::size_t batch_chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
+        moved.resize(std::max(moved.size(), batch_chunks));
+        chunk_counters.assign(batch_chunks, AdvanceCounters{});
+        // Isolated: a thread waiting here while the brick is pinned must not
+        // pick up another batch's task that could wait on the cache.
+        tbb::this_task_arena::isolate([&] {
+          tbb::parallel_for(std::size_t{0}, batch_chunks, [&](std::size_t c) {
+            const std::size_t begin = c * kRayGrain, end = std::min(batch.size(), begin + kRayGrain);
+            const std::span<const uint32_t> ids(batch.data() + begin, end - begin);
+            moved[c].clear();
+            trace(accel, ids);
+            if (track_demand)
+              demand[brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
+            AdvanceCounters counters;
+            for (const uint32_t ray : ids) {
+              const uint32_t next = advance(ray, counters);
+              if (next != kInvalidId) moved[c].emplace_back(next, ray);
+            }
+            chunk_counters[c] = counters;
+          });
+        });
+        for (std::size_t c = 0; c < batch_chunks; ++c) {
+          chunk_counters[c].add_to(stats);
+          proxy_ticks += chunk_counters[c].proxy_ticks;
+          for (const auto& [next, ray] : moved[c]) enqueue(next, ray);
+        }
+        if (ahead_now) trace_ahead(brick, accel);
+        pin.release();
+        stats.seconds_brick += seconds_since(t_brick);
+        continue;
+      }
+
+      // Several bricks: one task each loads, builds and pins its brick,
+      // traces its queue and its trace-ahead candidates (chosen here, among
+      // rays not queued at any of these bricks, so that no two tasks touch
+      // one ray), and unpins. Like a wave task it never waits while pinned.
+      ahead_begin.assign(want + 1, 0);
+      if (ahead_now) {
+        for (std::size_t q = 0; q < want; ++q) {
+          ahead_begin[q] = ahead_rays.size();
+          select_ahead(building[q], building);
+        }
+      }
+      ahead_begin[want] = ahead_rays.size();
+      reserve_ahead(ahead_rays.size());
+      ahead_counters.assign(want, AdvanceCounters{});
+      build_tasks.assign(want, BuildTask{});
+      moved.resize(std::max(moved.size(), want));
+      tbb::parallel_for(std::size_t{0}, want, [&](std::size_t q) {
+        BuildTask& task = build_tasks[q];
+        moved[q].clear();
+        const uint32_t brick = building[q];
+        const auto t0 = Clock::now();
+        auto acquired = cache_->acquire(brick);
+        task.build_seconds = seconds_since(t0);
+        if (!acquired.ok()) {
+          task.status = acquired.status();
+          return;
+        }
+        const PinnedBrick pin = std::move(acquired).value();
+        task.was_hit = pin.was_hit();
+        const std::vector<uint32_t>& batch = wave_batches[q];
+        trace(pin.accel(), batch);
+        if (track_demand)
+          demand[brick].fetch_sub(static_cast<uint32_t>(batch.size()), std::memory_order_relaxed);
+        for (const uint32_t ray : batch) {
+          const uint32_t next = advance(ray, task.counters);
+          if (next != kInvalidId) moved[q].emplace_back(next, ray);
+        }
+        trace_ahead_range(brick, pin.accel(), ahead_begin[q], ahead_begin[q + 1], ahead_counters[q]);
+        task.seconds = seconds_since(t0);
+      });
+      double task_build_seconds = 0, task_seconds = 0;
+      for (std::size_t q = 0; q < want; ++q) {
+        const BuildTask& task = build_tasks[q];
+        OUTCORE_RETURN_IF_ERROR(task.status);
+        if (!known_resident.empty()) known_resident[building[q]] = 1;
+        task.counters.add_to(stats);
+        proxy_ticks += task.counters.proxy_ticks;
+        task_build_seconds += task.build_seconds;
+        task_seconds += task.seconds;
+        ++stats.brick_acquisitions;
+        ++(task.was_hit ? stats.cache_hits : stats.cache_misses);
+        for (const auto& [next, ray] : moved[q]) enqueue(next, ray);
+      }
+      file_ahead();
+      // The tasks overlapped: their wall time is split between building and
+      // tracing in the proportion of their own times.
+      const double wall = seconds_since(t_brick);
+      const double building_share = task_seconds > 0 ? task_build_seconds / task_seconds : 0;
+      stats.seconds_build += wall * building_share;
+      stats.seconds_brick += wall * (1 - building_share);
     }
   }
 
@@ -564,6 +899,7 @@ std::string QueryStats::to_json() const {
   j.field("upper_nodes_visited", upper_nodes_visited).field("brick_visits", brick_visits);
   j.field("proxy_tests", proxy_tests).field("bricks_skipped_by_proxy", bricks_skipped_by_proxy);
   j.field("proxy_bytes", proxy_bytes);
+  j.field("rays_traced_ahead", rays_traced_ahead);
   j.field("brick_acquisitions", brick_acquisitions)
       .field("cache_hits", cache_hits)
       .field("cache_misses", cache_misses);
@@ -583,18 +919,19 @@ std::string QueryStats::to_text() const {
       buf, sizeof buf,
       "rays %llu (%llu hit, %llu invalid) in %.3f s = %.2f M rays/s\n"
       "  upper: %llu nodes visited, %.3f s first pass\n"
-      "  bricks: %llu ray visits, %llu acquisitions (%llu hits, %llu misses), %llu builds, %llu "
-      "evictions\n"
+      "  bricks: %llu ray visits (%llu traced ahead), %llu acquisitions (%llu hits, %llu misses), %llu "
+      "builds, %llu evictions\n"
       "  cache: peak %.1f MiB of %.1f MiB budget\n"
       "  time: build/wait %.3f s, brick traversal %.3f s\n",
       static_cast<unsigned long long>(rays), static_cast<unsigned long long>(rays_hit),
       static_cast<unsigned long long>(invalid_rays), seconds_total,
       seconds_total > 0 ? rays / seconds_total / 1e6 : 0.0,
       static_cast<unsigned long long>(upper_nodes_visited), seconds_upper,
-      static_cast<unsigned long long>(brick_visits), static_cast<unsigned long long>(brick_acquisitions),
-      static_cast<unsigned long long>(cache_hits), static_cast<unsigned long long>(cache_misses),
-      static_cast<unsigned long long>(brick_builds), static_cast<unsigned long long>(evictions),
-      peak_bytes_resident / 1048576.0, cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
+      static_cast<unsigned long long>(brick_visits), static_cast<unsigned long long>(rays_traced_ahead),
+      static_cast<unsigned long long>(brick_acquisitions), static_cast<unsigned long long>(cache_hits),
+      static_cast<unsigned long long>(cache_misses), static_cast<unsigned long long>(brick_builds),
+      static_cast<unsigned long long>(evictions), peak_bytes_resident / 1048576.0,
+      cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
   std::string text = buf;
   if (proxy_bytes > 0) {
     const uint64_t candidates = brick_visits + bricks_skipped_by_proxy;

@@ -8,7 +8,12 @@
 // hit is nearer than the next brick's entry (closest hit) or at its first hit
 // (any hit). Each ray therefore visits the same bricks in the same order
 // whatever the batch, budget, policy or thread count, so answers are bitwise
-// identical across all of them.
+// identical across all of them. When nothing waiting is resident, several
+// bricks are built at once (one per thread). Under a budget smaller than the
+// scene, a brick being built is also traced by the rays that reach it later
+// ("trace-ahead"); each keeps the outcome until its own turn there, so its
+// visits and answer are unchanged and the brick need not be built again for
+// it (docs/DESIGN.md).
 //
 // Brick proxies (core/proxy, on by default): before a ray is queued at a
 // brick, its segment is marched through the brick's resident occupancy grid;
@@ -61,6 +66,10 @@ struct QueryOptions {
   bool reorder = true;
   // Invalid rays are an error instead of counted misses.
   bool strict = false;
+  // Under a budget that cannot hold the scene, a brick being built is also
+  // traced by the rays that will reach it later, so that it need not be
+  // built again for them (query_engine.cpp). Answers are the same either way.
+  bool trace_ahead = true;
 };
 
 struct QueryStats {
@@ -69,6 +78,7 @@ struct QueryStats {
   uint64_t rays_hit = 0;
   uint64_t upper_nodes_visited = 0;
   uint64_t brick_visits = 0;             // (ray, brick) traversals
+  uint64_t rays_traced_ahead = 0;        // traced at a brick before reaching it (some never do)
   uint64_t proxy_tests = 0;              // (ray, brick) candidates tested against a proxy
   uint64_t bricks_skipped_by_proxy = 0;  // of those, visits avoided (the ray cannot hit the brick)
   uint64_t proxy_bytes = 0;              // the engine's resident proxies (0 without)
@@ -119,7 +129,7 @@ class QueryEngine {
   struct Scratch;
 
   QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
-              std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report);
+              std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report, bool cache_fits_scene);
 
   template <QueryKind kKind>
   Status run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
@@ -131,6 +141,7 @@ class QueryEngine {
   std::unique_ptr<BrickCache> cache_;
   std::unique_ptr<const ProxySet> proxies_;
   ProxyOpenReport proxy_report_;
+  bool cache_fits_scene_;
   std::mutex scratch_mutex_;  // taken twice per batch, never per ray
   std::vector<std::unique_ptr<Scratch>> free_scratch_;
 };

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <cmath>
@@ -371,6 +372,70 @@ TEST(QueryEngine, ConcurrentBatchesShareOneCacheAndEachGetsItsSerialAnswer) {
   for (std::size_t b = 0; b < batches.size(); ++b)
     EXPECT_TRUE(bitwise_equal(got[b], expected[b])) << "batch " << b;
   EXPECT_LE(shared->cache().counters().peak_resident_bytes, shared->cache().budget_bytes());
+}
+
+uint64_t total_reservation(const QueryEngine& engine) {
+  uint64_t total = 0;
+  for (const auto& b : engine.store().manifest().bricks)
+    total += engine.cache().builder().reserve_bytes(b.triangle_count);
+  return total;
+}
+
+std::vector<uint8_t> occluded_flags(QueryEngine& engine, const std::vector<Ray>& rays,
+                                    QueryOptions options = {}, QueryStats* stats = nullptr) {
+  std::vector<uint8_t> flags(rays.size(), 7);
+  const Status s = engine.occluded(rays, flags, options, stats);
+  EXPECT_TRUE(s.ok()) << s.to_string();
+  return flags;
+}
+
+// Under a quarter of the scene's size, bricks being built are also traced by
+// the rays that reach them later (trace-ahead), in one or several builds at
+// once: fewer builds, the same answers bitwise, the same visits.
+TEST(QueryEngine, TraceAheadUnderATightBudgetBuildsLessAndAnswersBitwiseTheSame) {
+  const auto scene = pack({"gen:city?of=(gen:sphere?level=3)&copies=40", "gen:sphere?level=4"}, 300);
+  const auto rays = mixed_rays(scene->bounds, 6000, 21);
+  auto unlimited = engine_for(*scene);
+  QueryStats unlimited_stats;
+  const std::vector<Hit> expected = intersect(*unlimited, rays, {}, &unlimited_stats);
+  const std::vector<uint8_t> expected_occluded = occluded_flags(*unlimited, rays);
+  EXPECT_EQ(unlimited_stats.rays_traced_ahead, 0u) << "nothing to save when the scene fits";
+  const uint64_t quarter = total_reservation(*unlimited) / 4;
+  const uint32_t scene_bricks = unlimited->store().brick_count();
+  ASSERT_GT(quarter, 2 * one_brick_budget(*unlimited));
+  QueryOptions without;
+  without.trace_ahead = false;
+  for (const bool proxies : {false, true}) {
+    for (const int threads : {1, 2, 4}) {
+      SCOPED_TRACE(std::string(proxies ? "proxies, " : "") + std::to_string(threads) + " threads");
+      // Raised above the machine's cores too: four builds at once.
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+      tbb::task_arena arena(threads);
+      arena.execute([&] {
+        QueryStats on, off, on_any, off_any;
+        auto ahead = engine_for(*scene, quarter, proxies);
+        EXPECT_TRUE(bitwise_equal(intersect(*ahead, rays, {}, &on), expected));
+        auto plain = engine_for(*scene, quarter, proxies);
+        EXPECT_TRUE(bitwise_equal(intersect(*plain, rays, without, &off), expected));
+        EXPECT_GT(on.rays_traced_ahead, 0u);
+        EXPECT_EQ(off.rays_traced_ahead, 0u);
+        // With proxies these rays rebuild next to nothing either way.
+        if (proxies) {
+          EXPECT_LE(on.brick_builds, off.brick_builds);
+        } else {
+          EXPECT_LT(on.brick_builds, off.brick_builds) << scene_bricks << " bricks";
+        }
+        EXPECT_LE(on.peak_bytes_resident, quarter);
+        EXPECT_EQ(on.brick_visits + on.bricks_skipped_by_proxy,
+                  off.brick_visits + off.bricks_skipped_by_proxy);
+        EXPECT_EQ(occluded_flags(*ahead, rays, {}, &on_any), expected_occluded);
+        EXPECT_EQ(occluded_flags(*plain, rays, without, &off_any), expected_occluded);
+        EXPECT_GT(on_any.rays_traced_ahead, 0u);
+        // A warm second batch under the same budget.
+        EXPECT_TRUE(bitwise_equal(intersect(*ahead, rays), expected));
+      });
+    }
+  }
 }
 
 TEST(QueryEngine, ReorderingLoadsEachBrickFewerTimesThanRayOrder) {
