@@ -107,6 +107,9 @@ int run_serve(const ServeArgs& args) {
   engine_options.brick_accel = args.brick_accel;
   auto engine = QueryEngine::open(args.scene, engine_options);
   if (!engine.ok()) return report_command_error("serve", engine.status().message());
+  spdlog::info("brick structure: {} ({}){}", engine_options.brick_accel,
+               describe_accel_options((*engine)->accel_options()),
+               (*engine)->cache_fits_scene() ? "" : "; the budget cannot hold the scene: trace-ahead on");
   if (const ProxySet* proxies = (*engine)->proxies()) {
     const ProxyOpenReport& report = (*engine)->proxy_report();
     spdlog::info("brick proxies: resolution {}, {} bricks, {} bytes resident, {} in {:.3f} s",

@@ -134,4 +134,11 @@ Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& na
   return not_found("unknown brick accel '" + name + "' (known: " + joined(brick_accel_names()) + ")");
 }
 
+std::string describe_accel_options(const BrickAccelOptions& options) {
+  if (options.empty()) return "defaults";
+  std::string text;
+  for (const auto& [key, value] : options) text += (text.empty() ? "" : " ") + key + "=" + value;
+  return text;
+}
+
 }  // namespace outcore

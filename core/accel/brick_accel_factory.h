@@ -38,5 +38,7 @@ using BrickAccelOptions = std::map<std::string, std::string>;
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options);
 std::vector<std::string> brick_accel_names();
+// "key=value key=value" in key order, or "defaults" when empty (for logs).
+std::string describe_accel_options(const BrickAccelOptions& options);
 
 }  // namespace outcore

@@ -117,6 +117,9 @@ int run_trace(const TraceArgs& args) {
   auto rays = read_rays_npy(args.rays_path);
   if (!rays.ok()) return report_command_error("trace", rays.status().message());
   if (args.print_stats) {
+    std::printf("brick structure: %s (%s)%s\n", engine_options.brick_accel.c_str(),
+                describe_accel_options((*engine)->accel_options()).c_str(),
+                (*engine)->cache_fits_scene() ? "" : "; the budget cannot hold the scene: trace-ahead on");
     if (const ProxySet* proxies = (*engine)->proxies()) {
       const ProxyOpenReport& report = (*engine)->proxy_report();
       std::printf("proxies: resolution %u, %u bricks, %.2f MiB, %s in %.3f s\n", proxies->config().resolution,

@@ -119,6 +119,11 @@ class QueryEngine {
   const ProxySet* proxies() const { return proxies_.get(); }
   // How the proxies were obtained (loaded from proxies.bin or built).
   const ProxyOpenReport& proxy_report() const { return proxy_report_; }
+  // The brick structure's options in effect: the user's, plus quality=low for
+  // embree when the budget cannot hold the scene and no quality was given.
+  const BrickAccelOptions& accel_options() const { return accel_options_; }
+  // Whether the budget holds every brick at once (by their reservations).
+  bool cache_fits_scene() const { return cache_fits_scene_; }
 
   ~QueryEngine();
 
@@ -142,6 +147,7 @@ class QueryEngine {
   std::unique_ptr<const ProxySet> proxies_;
   ProxyOpenReport proxy_report_;
   bool cache_fits_scene_;
+  BrickAccelOptions accel_options_;
   std::mutex scratch_mutex_;  // taken twice per batch, never per ray
   std::vector<std::unique_ptr<Scratch>> free_scratch_;
 };

@@ -438,6 +438,50 @@ TEST(QueryEngine, TraceAheadUnderATightBudgetBuildsLessAndAnswersBitwiseTheSame)
   }
 }
 
+std::unique_ptr<QueryEngine> engine_with_quality(const PackedScene& scene, uint64_t cache_bytes,
+                                                 const std::string& quality) {
+  EngineOptions options;
+  options.cache_bytes = cache_bytes;
+  if (!quality.empty()) options.accel_options["quality"] = quality;
+  auto engine = QueryEngine::open(scene.path, options);
+  EXPECT_TRUE(engine.ok()) << engine.status().to_string();
+  return std::move(engine).value();
+}
+
+// The engine builds Embree bricks at low quality under a tight budget, so the
+// answer must not depend on the quality: ties (duplicated geometry), packets
+// (camera rays) and incoherent rays, closest and any hit.
+TEST(QueryEngine, EmbreeBuildQualityNeverChangesAnAnswer) {
+  const auto scene = pack({"gen:sphere?level=4", "gen:sphere?level=4", "gen:torus?cx=1.5"}, 400);
+  std::vector<Ray> rays = mixed_rays(scene->bounds, 4000, 31);
+  const std::vector<Ray> camera = camera_rays(scene->bounds, 64);
+  rays.insert(rays.end(), camera.begin(), camera.end());
+  auto medium = engine_with_quality(*scene, uint64_t{1} << 30, "medium");
+  const std::vector<Hit> expected = intersect(*medium, rays);
+  const std::vector<uint8_t> expected_occluded = occluded_flags(*medium, rays);
+  for (const std::string quality : {"low", "high"}) {
+    auto engine = engine_with_quality(*scene, uint64_t{1} << 30, quality);
+    EXPECT_TRUE(bitwise_equal(intersect(*engine, rays), expected)) << quality;
+    EXPECT_EQ(occluded_flags(*engine, rays), expected_occluded) << quality;
+  }
+}
+
+TEST(QueryEngine, ABudgetBelowTheSceneBuildsEmbreeBricksAtLowQualityUnlessTheUserChose) {
+  const auto scene = pack({"gen:city?of=(gen:sphere?level=3)&copies=12"}, 300);
+  auto roomy = engine_with_quality(*scene, uint64_t{1} << 30, "");
+  EXPECT_TRUE(roomy->cache_fits_scene());
+  EXPECT_FALSE(roomy->accel_options().contains("quality"));
+  const uint64_t tight = total_reservation(*roomy) / 4;
+  auto low = engine_with_quality(*scene, tight, "");
+  EXPECT_FALSE(low->cache_fits_scene());
+  EXPECT_EQ(low->accel_options().at("quality"), "low");
+  auto chosen = engine_with_quality(*scene, tight, "medium");
+  EXPECT_EQ(chosen->accel_options().at("quality"), "medium");
+  // And the answers agree.
+  const auto rays = mixed_rays(scene->bounds, 3000, 32);
+  EXPECT_TRUE(bitwise_equal(intersect(*low, rays), intersect(*roomy, rays)));
+}
+
 TEST(QueryEngine, ReorderingLoadsEachBrickFewerTimesThanRayOrder) {
   const auto scene = pack({"gen:city?of=(gen:sphere?level=3)&copies=30"}, 300);
   const auto rays = mixed_rays(scene->bounds, 2000, 7);
