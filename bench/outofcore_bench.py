@@ -126,8 +126,10 @@ def main():
         subset = os.path.join(a.work, f"{kind}-subset.npy")
         # A random subset: the first rays of a camera batch are one corner of
         # the image (which may miss everything).
-        picked = np.sort(np.random.default_rng(7).choice(a.rays, size=min(a.rays, a.noreorder_rays), replace=False))
-        np.save(subset, np.load(rays)[picked])
+        all_rays = np.load(rays)
+        picked = np.sort(np.random.default_rng(7).choice(len(all_rays), size=min(len(all_rays), a.noreorder_rays),
+                                                         replace=False))
+        np.save(subset, all_rays[picked])
         for fraction in fractions:
             budget_mib = max(1, int(built * fraction / 2**20))
             lru_trace = os.path.join(a.work, f"{kind}-{fraction}-lru.csv")

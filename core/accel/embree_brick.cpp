@@ -198,7 +198,10 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
   accel->center_ = n > 0 ? bounds.center() : Vec3f();
 
   if (kept > 0) {
-    EmbreeDevice::ExclusiveSection section(*device);
+    // Parallel when no other brick is committing in parallel (one large
+    // brick builds on every core); otherwise on this thread, next to the
+    // other builds.
+    EmbreeDevice::MeasuredSection section(*device, /*allow_parallel=*/true);
     RTCScene scene = rtcNewScene(device->handle());
     RTCGeometry geometry =
         scene != nullptr ? rtcNewGeometry(device->handle(), RTC_GEOMETRY_TYPE_TRIANGLE) : nullptr;
@@ -215,10 +218,7 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
       rtcCommitGeometry(geometry);
       rtcAttachGeometryByID(scene, geometry, 0);
       rtcReleaseGeometry(geometry);
-      // Isolated: while this thread waits inside the commit it must not pick
-      // up an outer task (say, another brick's build) that would block on the
-      // allocation mutex this thread holds.
-      tbb::this_task_arena::isolate([&] { rtcCommitScene(scene); });
+      section.commit(scene);
     }
     Status status = device->take_error(what);
     if (status.ok() && (scene == nullptr || geometry == nullptr))
@@ -239,7 +239,7 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
 EmbreeBrickAccel::~EmbreeBrickAccel() {
   if (scene_ == nullptr) return;
   auto device = EmbreeDevice::instance();  // exists: it made scene_
-  EmbreeDevice::ExclusiveSection section(**device);
+  EmbreeDevice::MeasuredSection section(**device, /*allow_parallel=*/false);
   rtcReleaseScene(scene_);
 }
 

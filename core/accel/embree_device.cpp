@@ -1,5 +1,8 @@
 #include "core/accel/embree_device.h"
 
+#include <tbb/task_arena.h>
+
+#include <cassert>
 #include <string>
 
 namespace outcore {
@@ -8,6 +11,8 @@ namespace {
 // The message of the last error Embree reported on this thread (the callback
 // runs on the thread whose API call failed).
 thread_local std::string t_last_error_message;
+// The section open on this thread, if any.
+thread_local EmbreeDevice::MeasuredSection* t_section = nullptr;
 
 const char* rtc_error_name(RTCError code) {
   switch (code) {
@@ -59,11 +64,12 @@ bool EmbreeDevice::memory_monitor(void* user, ssize_t bytes, bool /*post*/) {
   // Embree calls this with bytes > 0 before it allocates and bytes < 0 after
   // it frees. Never refuse: budgets are enforced by the cache's reservations.
   auto* self = static_cast<EmbreeDevice*>(user);
-  const int64_t now = self->live_bytes_.fetch_add(bytes, std::memory_order_relaxed) + bytes;
-  if (bytes > 0) {
-    int64_t peak = self->peak_bytes_.load(std::memory_order_relaxed);
-    while (now > peak && !self->peak_bytes_.compare_exchange_weak(peak, now, std::memory_order_relaxed)) {
-    }
+  self->live_bytes_.fetch_add(bytes, std::memory_order_relaxed);
+  MeasuredSection* section = t_section != nullptr ? t_section : self->parallel_section_.load();
+  if (section != nullptr) {
+    section->add(bytes);
+  } else {
+    self->unattributed_bytes_.fetch_add(bytes, std::memory_order_relaxed);
   }
   return true;
 }
@@ -81,19 +87,39 @@ Status EmbreeDevice::take_error(const std::string& what) const {
   return status_from_rtc_error(code, what);
 }
 
-EmbreeDevice::ExclusiveSection::ExclusiveSection(EmbreeDevice& device)
-    : lock_(device.allocation_mutex_), device_(device), start_bytes_(device.live_bytes()) {
-  // Only this section moves the counter now, so the peak restarts from here.
-  device_.peak_bytes_.store(start_bytes_, std::memory_order_relaxed);
+EmbreeDevice::MeasuredSection::MeasuredSection(EmbreeDevice& device, bool allow_parallel) : device_(device) {
+  assert(t_section == nullptr && "sections never nest");
+  t_section = this;
+  if (allow_parallel) {
+    parallel_lock_ = std::unique_lock<std::mutex>(device.parallel_commit_mutex_, std::try_to_lock);
+    if (parallel_lock_.owns_lock()) device.parallel_section_.store(this);
+  }
 }
 
-int64_t EmbreeDevice::ExclusiveSection::delta_bytes() const {
-  return device_.live_bytes() - start_bytes_;
+EmbreeDevice::MeasuredSection::~MeasuredSection() {
+  if (parallel()) device_.parallel_section_.store(nullptr);
+  t_section = nullptr;
 }
 
-int64_t EmbreeDevice::ExclusiveSection::peak_delta_bytes() const {
-  const int64_t peak = device_.peak_bytes_.load(std::memory_order_relaxed);
-  return peak > start_bytes_ ? peak - start_bytes_ : 0;
+void EmbreeDevice::MeasuredSection::add(int64_t bytes) {
+  const int64_t now = delta_.fetch_add(bytes, std::memory_order_relaxed) + bytes;
+  int64_t peak = peak_.load(std::memory_order_relaxed);
+  while (now > peak && !peak_.compare_exchange_weak(peak, now, std::memory_order_relaxed)) {
+  }
+}
+
+void EmbreeDevice::MeasuredSection::commit(RTCScene scene) {
+  if (parallel()) {
+    // Isolated: while this thread waits inside the commit it must not pick
+    // up an outer task (another brick's build, say) that would open a second
+    // section on it.
+    tbb::this_task_arena::isolate([&] { rtcCommitScene(scene); });
+    return;
+  }
+  // One slot, taken by this thread: Embree's tasks for this commit all run
+  // here, so every byte it allocates is seen by this thread's section.
+  static thread_local tbb::task_arena one_thread(1);
+  one_thread.execute([&] { rtcCommitScene(scene); });
 }
 
 }  // namespace outcore

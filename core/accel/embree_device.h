@@ -13,18 +13,18 @@
 //   small scene and geometry objects themselves are not reported, see
 //   EmbreeBrickAccel) and its running maximum.
 //
-// Attribution. The monitor callback fires on whatever thread allocates —
-// during a commit mostly TBB worker threads that may at the same time be
-// helping another commit — so bytes cannot be attributed to a scene through
-// thread-local counters or the callback's arguments (it gets only the device's
-// user pointer). Instead, everything that makes Embree allocate or free
-// (scene and geometry creation, commit, release) runs inside an
-// ExclusiveSection, which holds one process-wide mutex: while it is held no
-// other scene's bytes can move, so the counter's change (and its peak) over the
-// section is exactly that scene's. The price is that brick builds are
-// serialised; each build is itself parallel (Embree uses TBB inside commit).
-// Tracing (rtcIntersect*/rtcOccluded*) allocates nothing and never takes the
-// mutex.
+// Attribution. The monitor callback fires on whatever thread allocates, and
+// gets only the device's user pointer. So everything that makes Embree
+// allocate or free (scene and geometry creation, commit, release) runs in a
+// MeasuredSection, which attributes to itself what Embree allocates or frees
+// on its own thread. A commit normally runs on that thread alone (in a
+// one-thread TBB arena), so several bricks build at once, each measured
+// exactly. One section at a time may instead commit in parallel (Embree's
+// TBB tasks on other threads): it then also takes the bytes of threads that
+// are in no section — only its own commit's helpers can be, since every other
+// Embree call is in a section. Bytes that reach no section at all are counted
+// as unattributed (a bug if ever non-zero; tested).
+// Tracing (rtcIntersect*/rtcOccluded*) allocates nothing.
 //
 // Thread-safety: instance() and all member functions may be called from any
 // thread. The device is never released: scenes released during static
@@ -57,25 +57,37 @@ class EmbreeDevice {
   // `what` as context, or OK when there is none.
   Status take_error(const std::string& what) const;
 
-  // Holds the process-wide allocation mutex; measures the bytes Embree
-  // allocates or frees while it is held. Sections never nest.
-  class ExclusiveSection {
-   public:
-    explicit ExclusiveSection(EmbreeDevice& device);
-    ExclusiveSection(const ExclusiveSection&) = delete;
-    ExclusiveSection& operator=(const ExclusiveSection&) = delete;
+  // Bytes allocated (net) outside every section: 0 unless a call that makes
+  // Embree allocate was left outside one.
+  int64_t unattributed_bytes() const { return unattributed_bytes_.load(std::memory_order_relaxed); }
 
-    // Net change of the device's bytes since the section began (negative
-    // when it freed more than it allocated).
-    int64_t delta_bytes() const;
-    // Highest point of the device's bytes during the section, minus the bytes
-    // at its start (>= 0).
-    int64_t peak_delta_bytes() const;
+  // Counts what Embree allocates or frees on the calling thread while it
+  // lives (and, when parallel(), on threads in no section). Sections never
+  // nest on one thread.
+  class MeasuredSection {
+   public:
+    // allow_parallel: may commit in parallel if no other section does.
+    MeasuredSection(EmbreeDevice& device, bool allow_parallel);
+    ~MeasuredSection();
+    MeasuredSection(const MeasuredSection&) = delete;
+    MeasuredSection& operator=(const MeasuredSection&) = delete;
+
+    bool parallel() const { return parallel_lock_.owns_lock(); }
+    // rtcCommitScene: in parallel when parallel(), else on this thread only.
+    void commit(RTCScene scene);
+    // Net bytes since the section began (negative when it freed more).
+    int64_t delta_bytes() const { return delta_.load(std::memory_order_relaxed); }
+    // Highest point of the section's bytes (>= 0).
+    int64_t peak_delta_bytes() const { return peak_.load(std::memory_order_relaxed); }
 
    private:
-    std::lock_guard<std::mutex> lock_;
+    friend class EmbreeDevice;
+    void add(int64_t bytes);
+
     EmbreeDevice& device_;
-    int64_t start_bytes_;
+    std::unique_lock<std::mutex> parallel_lock_;
+    std::atomic<int64_t> delta_{0};
+    std::atomic<int64_t> peak_{0};
   };
 
  private:
@@ -85,8 +97,10 @@ class EmbreeDevice {
 
   RTCDevice device_ = nullptr;
   std::atomic<int64_t> live_bytes_{0};
-  std::atomic<int64_t> peak_bytes_{0};
-  std::mutex allocation_mutex_;
+  std::atomic<int64_t> unattributed_bytes_{0};
+  std::mutex parallel_commit_mutex_;
+  // The section committing in parallel, if any (set under the mutex).
+  std::atomic<MeasuredSection*> parallel_section_{nullptr};
 };
 
 }  // namespace outcore
