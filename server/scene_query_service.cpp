@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
@@ -64,8 +65,22 @@ bool deadline_passed(const grpc::ServerContext* context) {
 
 }  // namespace
 
+namespace {
+
+ServiceOptions resolve(const ServiceOptions& options, const QueryEngine& engine) {
+  ServiceOptions resolved = options;
+  if (resolved.max_group_rays == 0) {
+    resolved.max_group_rays = std::max<uint64_t>(1, kGroupRaysPerBrick * engine.store().brick_count());
+  }
+  return resolved;
+}
+
+}  // namespace
+
 SceneQueryService::SceneQueryService(QueryEngine& engine, const ServiceOptions& options)
-    : engine_(engine), options_(options) {}
+    : engine_(engine), options_(resolve(options, engine)) {
+  spdlog::debug("streams: chunks traced together up to {} rays", options_.max_group_rays);
+}
 
 template <QueryKind kKind>
 Expected<std::span<const Ray>> SceneQueryService::check_request(const v1::QueryRequest& request,

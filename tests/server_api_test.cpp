@@ -69,7 +69,9 @@ class ServerApi : public ::testing::Test {
     engine_ = engine->release();
     std::string error;
     server_ =
-        ServerProcess::start(store_, {"--max-message-mb", "1", "--log-level", "debug"}, error).release();
+        ServerProcess::start(
+            store_, {"--max-message-mb", "1", "--log-level", "debug", "--stream-group-rays", "100000"}, error)
+            .release();
     ASSERT_NE(server_, nullptr) << error;
   }
   static void TearDownTestSuite() {
