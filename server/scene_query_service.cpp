@@ -2,10 +2,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
 #include "server/grpc_status.h"
+#include "server/stream_pipeline.h"
 
 namespace outcore::server {
 
@@ -51,77 +53,182 @@ void fill_stats(const QueryStats& stats, v1::QueryStats* out) {
   out->set_seconds_build(stats.seconds_build);
 }
 
+#define OUTCORE_RETURN_IF_GRPC_ERROR(expr) \
+  do {                                     \
+    const grpc::Status _status = (expr);   \
+    if (!_status.ok()) return _status;     \
+  } while (false)
+
 bool deadline_passed(const grpc::ServerContext* context) {
   return context->deadline() <= std::chrono::system_clock::now();
 }
 
 }  // namespace
 
-SceneQueryService::SceneQueryService(QueryEngine& engine, const ServiceOptions& options)
-    : engine_(engine), options_(options) {}
+namespace {
 
-template <QueryKind kKind, class Response>
-grpc::Status SceneQueryService::answer(grpc::ServerContext* context, const v1::QueryRequest& request,
-                                       const BatchPosition& position, Response* response) {
-  using Traits = KindTraits<kKind>;
-  std::vector<Ray> storage;
-  auto rays = decode_ray_batch(request.batch(), storage);
-  if (!rays.ok()) return to_grpc_status(rays.status().with_context(where(position)));
-  const uint64_t n = rays->size();
-  const uint64_t reply_bytes = n * Traits::kReplyBytesPerRay + kReplyOverheadBytes;
-  if (reply_bytes > options_.max_message_bytes) {
-    return to_grpc_status(resource_exhausted(where(position) + ": the reply to " + std::to_string(n) +
-                                             " rays would take about " + std::to_string(reply_bytes) +
-                                             " bytes, over the server's max message size of " +
-                                             std::to_string(options_.max_message_bytes) +
-                                             " bytes (--max-message-mb); send fewer rays per message"));
+ServiceOptions resolve(const ServiceOptions& options, const QueryEngine& engine) {
+  ServiceOptions resolved = options;
+  if (resolved.max_group_rays == 0) {
+    resolved.max_group_rays = std::max<uint64_t>(1, kGroupRaysPerBrick * engine.store().brick_count());
   }
-  const Status valid = check_rays(*rays, position, request.strict());
-  if (!valid.ok()) return to_grpc_status(valid);
+  return resolved;
+}
+
+}  // namespace
+
+SceneQueryService::SceneQueryService(QueryEngine& engine, const ServiceOptions& options)
+    : engine_(engine), options_(resolve(options, engine)) {
+  spdlog::debug("streams: chunks traced together up to {} rays", options_.max_group_rays);
+}
+
+template <QueryKind kKind>
+Expected<std::span<const Ray>> SceneQueryService::check_request(const v1::QueryRequest& request,
+                                                                const BatchPosition& position,
+                                                                std::vector<Ray>& storage) const {
+  auto rays = decode_ray_batch(request.batch(), storage);
+  if (!rays.ok()) return rays.status().with_context(where(position));
+  const uint64_t n = rays->size();
+  const uint64_t reply_bytes = n * KindTraits<kKind>::kReplyBytesPerRay + kReplyOverheadBytes;
+  if (reply_bytes > options_.max_message_bytes) {
+    return resource_exhausted(where(position) + ": the reply to " + std::to_string(n) +
+                              " rays would take about " + std::to_string(reply_bytes) +
+                              " bytes, over the server's max message size of " +
+                              std::to_string(options_.max_message_bytes) +
+                              " bytes (--max-message-mb); send fewer rays per message");
+  }
+  OUTCORE_RETURN_IF_ERROR(check_rays(*rays, position, request.strict()));
+  return rays;
+}
+
+grpc::Status SceneQueryService::check_still_wanted(grpc::ServerContext* context, const std::string& what,
+                                                   uint64_t rays) const {
   if (context->IsCancelled()) {
-    return grpc::Status(grpc::StatusCode::CANCELLED,
-                        where(position) + " cancelled by the client before tracing");
+    return grpc::Status(grpc::StatusCode::CANCELLED, what + " cancelled by the client before tracing");
   }
   if (deadline_passed(context)) {
-    return grpc::Status(
-        grpc::StatusCode::DEADLINE_EXCEEDED,
-        "the deadline expired before " + where(position) + " (" + std::to_string(n) + " rays) was traced");
+    return grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED, "the deadline expired before " + what + " (" +
+                                                                 std::to_string(rays) + " rays) was traced");
   }
+  return grpc::Status::OK;
+}
 
+template <QueryKind kKind>
+Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v1::QueryRequest& request,
+                                QueryStats* stats) {
   QueryOptions query_options;
   query_options.reorder = !request.no_reorder();
   query_options.strict = request.strict();
-  QueryStats stats;
-  std::string* payload = Traits::payload(response);
-  payload->resize(n * Traits::kReplyBytesPerRay);
+  const uint64_t n = rays.size();
   Status status;
   if constexpr (kKind == QueryKind::kClosestHit) {
-    // Hits go straight into the reply's bytes; a std::string's buffer is
-    // float-aligned in practice, the fallback only costs a copy.
-    if (reinterpret_cast<uintptr_t>(payload->data()) % alignof(Hit) == 0) {
-      status = engine_.intersect(*rays, std::span<Hit>(reinterpret_cast<Hit*>(payload->data()), n),
-                                 query_options, &stats);
+    // Hits go straight into `out` (a reply's bytes); a std::string's buffer
+    // is float-aligned in practice, the fallback only costs a copy.
+    if (reinterpret_cast<uintptr_t>(out) % alignof(Hit) == 0) {
+      status = engine_.intersect(rays, std::span<Hit>(reinterpret_cast<Hit*>(out), n), query_options, stats);
     } else {
       std::vector<Hit> hits(n);
-      status = engine_.intersect(*rays, hits, query_options, &stats);
-      if (n) std::memcpy(payload->data(), static_cast<const void*>(hits.data()), n * sizeof(Hit));
+      status = engine_.intersect(rays, hits, query_options, stats);
+      if (n) std::memcpy(out, static_cast<const void*>(hits.data()), n * sizeof(Hit));
     }
   } else {
-    status = engine_.occluded(*rays, std::span<uint8_t>(reinterpret_cast<uint8_t*>(payload->data()), n),
-                              query_options, &stats);
+    status = engine_.occluded(rays, std::span<uint8_t>(out, n), query_options, stats);
   }
+  if (status.ok()) {
+    rays_.fetch_add(stats->rays, std::memory_order_relaxed);
+    rays_hit_.fetch_add(stats->rays_hit, std::memory_order_relaxed);
+    invalid_rays_.fetch_add(stats->invalid_rays, std::memory_order_relaxed);
+    nanoseconds_tracing_.fetch_add(static_cast<uint64_t>(stats->seconds_total * 1e9),
+                                   std::memory_order_relaxed);
+  }
+  return status;
+}
+
+template <QueryKind kKind, class Response>
+grpc::Status SceneQueryService::answer(grpc::ServerContext* context, const v1::QueryRequest& request,
+                                       Response* response) {
+  using Traits = KindTraits<kKind>;
+  const BatchPosition position;
+  std::vector<Ray> widened;
+  auto rays = check_request<kKind>(request, position, widened);
+  if (!rays.ok()) return to_grpc_status(rays.status());
+  const uint64_t n = rays->size();
+  OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, where(position), n));
+  std::string* payload = Traits::payload(response);
+  payload->resize(n * Traits::kReplyBytesPerRay);
+  QueryStats stats;
+  const Status status = trace<kKind>(*rays, reinterpret_cast<uint8_t*>(payload->data()), request, &stats);
   if (!status.ok()) {
     payload->clear();
-    return to_grpc_status(position.streamed ? status.with_context(where(position)) : status);
+    return to_grpc_status(status);
   }
   response->set_layout_version(1);
   response->set_ray_count(n);
   response->set_sequence(request.sequence());
   fill_stats(stats, response->mutable_stats());
-  rays_.fetch_add(stats.rays, std::memory_order_relaxed);
-  rays_hit_.fetch_add(stats.rays_hit, std::memory_order_relaxed);
-  invalid_rays_.fetch_add(stats.invalid_rays, std::memory_order_relaxed);
-  nanoseconds_tracing_.fetch_add(static_cast<uint64_t>(stats.seconds_total * 1e9), std::memory_order_relaxed);
+  return grpc::Status::OK;
+}
+
+template <QueryKind kKind, class Response>
+grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
+                                             std::span<const std::unique_ptr<StreamChunk>> group,
+                                             GroupBuffers& buffers,
+                                             std::span<const std::unique_ptr<Response>> replies) {
+  using Traits = KindTraits<kKind>;
+  uint64_t n = 0;
+  for (const auto& chunk : group) n += chunk->rays.size();
+  const StreamChunk& first = *group.front();
+  OUTCORE_RETURN_IF_GRPC_ERROR(
+      check_still_wanted(context,
+                         group.size() == 1 ? where(first.position)
+                                           : "chunks " + std::to_string(first.position.chunk) + " to " +
+                                                 std::to_string(group.back()->position.chunk),
+                         n));
+
+  QueryStats stats;
+  Status status;
+  if (group.size() == 1) {
+    std::string* payload = Traits::payload(replies.front().get());
+    payload->resize(n * Traits::kReplyBytesPerRay);
+    status = trace<kKind>(first.rays, reinterpret_cast<uint8_t*>(payload->data()), first.request, &stats);
+  } else {
+    // One engine call for the whole group: its rays gathered into one batch,
+    // its answers split into the chunks' replies (two copies, far cheaper
+    // than tracing the chunks one by one; see stream_pipeline.h).
+    buffers.rays.resize(n);
+    buffers.answers.resize(n * Traits::kReplyBytesPerRay);
+    uint64_t at = 0;
+    for (const auto& chunk : group) {
+      if (!chunk->rays.empty()) std::memcpy(&buffers.rays[at], chunk->rays.data(), chunk->rays.size_bytes());
+      at += chunk->rays.size();
+    }
+    status =
+        trace<kKind>(buffers.rays, reinterpret_cast<uint8_t*>(buffers.answers.data()), first.request, &stats);
+    if (status.ok()) {
+      at = 0;
+      for (size_t i = 0; i < group.size(); ++i) {
+        const uint64_t bytes = group[i]->rays.size() * Traits::kReplyBytesPerRay;
+        Traits::payload(replies[i].get())
+            ->assign(reinterpret_cast<const char*>(buffers.answers.data()) + at, bytes);
+        at += bytes;
+      }
+    }
+  }
+  if (!status.ok()) return to_grpc_status(status.with_context(where(first.position)));
+  for (size_t i = 0; i < group.size(); ++i) {
+    Response* reply = replies[i].get();
+    reply->set_layout_version(1);
+    reply->set_ray_count(group[i]->rays.size());
+    reply->set_sequence(group[i]->request.sequence());
+    if (i + 1 == group.size()) {
+      // The engine call's figures go with the group's last reply; the others
+      // count only their own rays (the stream's sums stay exact).
+      fill_stats(stats, reply->mutable_stats());
+      reply->mutable_stats()->set_rays(group[i]->rays.size());
+    } else {
+      reply->mutable_stats()->set_rays(group[i]->rays.size());
+    }
+  }
   return grpc::Status::OK;
 }
 
@@ -144,23 +251,71 @@ grpc::Status SceneQueryService::finish(const char* method, const grpc::Status& s
 template <QueryKind kKind, class Response>
 grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
                                              grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream) {
+  using Traits = KindTraits<kKind>;
+  const auto stream_start = Clock::now();
+  StreamPipeline<Response> pipeline(stream, options_.max_group_rays);
+  // The tracer's first error; read once the tracer has been joined.
+  grpc::Status tracer_status = grpc::Status::OK;
+  pipeline.start([&] {
+    typename StreamPipeline<Response>::Chunks group;
+    typename StreamPipeline<Response>::Replies replies;
+    GroupBuffers buffers;
+    while (pipeline.take_group(group)) {
+      const auto start = Clock::now();
+      if (!pipeline.acquire_replies(group.size(), replies)) break;
+      const grpc::Status status = answer_group<kKind, Response>(context, group, buffers, replies);
+      for (const auto& chunk : group) {
+        finish(Traits::kStream, status, chunk->rays.size(), start);
+      }
+      if (!status.ok()) {
+        tracer_status = status;
+        pipeline.fail();
+        break;
+      }
+      pipeline.post_replies(replies, std::chrono::duration<double>(Clock::now() - start).count());
+      pipeline.recycle(group);
+    }
+  });
+
   BatchPosition position;
   position.streamed = true;
-  v1::QueryRequest request;
-  Response response;
-  while (stream->Read(&request)) {
+  grpc::Status status = grpc::Status::OK;
+  for (;;) {
+    std::unique_ptr<StreamChunk> chunk = pipeline.spare_chunk();
     const auto start = Clock::now();
-    response.Clear();  // keeps the payload's capacity for the next chunk
-    const grpc::Status status =
-        finish(KindTraits<kKind>::kStream, answer<kKind>(context, request, position, &response),
-               request.batch().ray_count(), start);
-    if (!status.ok()) return status;
-    if (!stream->Write(response)) {
-      return grpc::Status(grpc::StatusCode::CANCELLED,
-                          "the client went away before the reply to chunk " + std::to_string(position.chunk));
+    if (!stream->Read(&chunk->request)) break;
+    pipeline.add_reading_time(std::chrono::duration<double>(Clock::now() - start).count());
+    chunk->position = position;
+    auto rays = check_request<kKind>(chunk->request, position, chunk->widened);
+    if (!rays.ok()) {
+      status =
+          finish(Traits::kStream, to_grpc_status(rays.status()), chunk->request.batch().ray_count(), start);
+      break;
     }
-    position.first_ray += response.ray_count();
+    chunk->rays = *rays;
+    position.first_ray += rays->size();
     ++position.chunk;
+    if (!pipeline.push(std::move(chunk))) break;
+  }
+  // The replies to the chunks before an error go out before it.
+  pipeline.close_and_wait();
+  if (spdlog::should_log(spdlog::level::debug)) {
+    const StreamTimes& t = pipeline.times();
+    spdlog::debug(
+        "{}: {} chunks, {} rays in {:.3f} ms, {} engine calls; handler reading {:.3f} ms, waiting for the "
+        "tracer {:.3f} ms; tracer answering {:.3f} ms, waiting for the writer {:.3f} ms; writer writing "
+        "{:.3f} ms",
+        Traits::kStream, position.chunk, position.first_ray,
+        std::chrono::duration<double, std::milli>(Clock::now() - stream_start).count(), t.groups,
+        t.reading * 1e3, t.waiting_to_queue * 1e3, t.tracing * 1e3, t.waiting_to_reply * 1e3,
+        t.writing * 1e3);
+  }
+  if (!tracer_status.ok()) return tracer_status;
+  if (!status.ok()) return status;
+  if (pipeline.write_failed()) {
+    return grpc::Status(grpc::StatusCode::CANCELLED, "the client went away before all replies to its " +
+                                                         std::to_string(position.chunk) +
+                                                         " chunks were written");
   }
   if (context->IsCancelled()) {
     return grpc::Status(grpc::StatusCode::CANCELLED, "the client cancelled the stream after " +
@@ -172,14 +327,14 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
 grpc::Status SceneQueryService::Intersect(grpc::ServerContext* context, const v1::QueryRequest* request,
                                           v1::IntersectResponse* response) {
   const auto start = Clock::now();
-  return finish("Intersect", answer<QueryKind::kClosestHit>(context, *request, BatchPosition{}, response),
+  return finish("Intersect", answer<QueryKind::kClosestHit>(context, *request, response),
                 request->batch().ray_count(), start);
 }
 
 grpc::Status SceneQueryService::Occluded(grpc::ServerContext* context, const v1::QueryRequest* request,
                                          v1::OccludedResponse* response) {
   const auto start = Clock::now();
-  return finish("Occluded", answer<QueryKind::kAnyHit>(context, *request, BatchPosition{}, response),
+  return finish("Occluded", answer<QueryKind::kAnyHit>(context, *request, response),
                 request->batch().ray_count(), start);
 }
 

@@ -41,6 +41,7 @@ struct ServeArgs {
   int threads = 0;
   int rpc_threads = 64;
   uint32_t max_message_mb = 64;
+  int64_t stream_group_rays = 0;  // 0: automatic
   std::string log_level = "info";
 };
 
@@ -78,6 +79,9 @@ int run_serve(const ServeArgs& args) {
         "serve", "--max-message-mb must be between 1 and 2047, got " + std::to_string(args.max_message_mb));
   }
   if (args.threads < 0) return report_command_error("serve", "--threads must be >= 0 (0: all cores)");
+  if (args.stream_group_rays < 0) {
+    return report_command_error("serve", "--stream-group-rays must be >= 0 (0: automatic)");
+  }
   if (args.rpc_threads < 2) return report_command_error("serve", "--rpc-threads must be at least 2");
   const auto colon = args.listen.rfind(':');
   if (colon == std::string::npos || colon == 0 || colon + 1 == args.listen.size()) {
@@ -122,6 +126,7 @@ int run_serve(const ServeArgs& args) {
 
   server::ServiceOptions service_options;
   service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
+  service_options.max_group_rays = static_cast<uint64_t>(args.stream_group_rays);
   server::SceneQueryService service(**engine, service_options);
 
   grpc::EnableDefaultHealthCheckService(true);
@@ -193,6 +198,10 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--rpc-threads", args->rpc_threads, "Most threads serving calls at once")
       ->capture_default_str();
   cmd->add_option("--max-message-mb", args->max_message_mb, "Largest message either way, MiB")
+      ->capture_default_str();
+  cmd->add_option("--stream-group-rays", args->stream_group_rays,
+                  "Most rays of a stream traced in one engine call (chunks that queued up while the "
+                  "engine was busy are traced together); 0: 1024 per brick of the store")
       ->capture_default_str();
   cmd->add_option("--log-level", args->log_level, "Log level")
       ->check(CLI::IsMember({"debug", "info", "warn"}))

@@ -69,7 +69,9 @@ class ServerApi : public ::testing::Test {
     engine_ = engine->release();
     std::string error;
     server_ =
-        ServerProcess::start(store_, {"--max-message-mb", "1", "--log-level", "debug"}, error).release();
+        ServerProcess::start(
+            store_, {"--max-message-mb", "1", "--log-level", "debug", "--stream-group-rays", "100000"}, error)
+            .release();
     ASSERT_NE(server_, nullptr) << error;
   }
   static void TearDownTestSuite() {
@@ -440,6 +442,49 @@ TEST_F(ServerApi, StreamRepliesEchoSequencesInOrder) {
   }
   EXPECT_FALSE(stream->Read(&response));
   EXPECT_TRUE(stream->Finish().ok());
+}
+
+TEST_F(ServerApi, ChunksQueuedWhileTheEngineIsBusyAreTracedTogetherWithOneReplyEach) {
+  // A big first chunk keeps the engine busy while the small ones queue up
+  // behind it; one chunk in the middle is strict (never grouped with the
+  // others). Every reply must still be its chunk's serial answer, in order.
+  grpc::ClientContext context;
+  auto stream = stub_->IntersectStream(&context);
+  std::vector<std::vector<Ray>> chunks;
+  constexpr uint64_t kChunks = 12;
+  for (uint64_t c = 0; c < kChunks; ++c) {
+    chunks.push_back(rays(c == 0 ? 30000 : 700 + 10 * c, 40 + c));
+    v1::QueryRequest request = make_request(chunks.back(), c);
+    request.set_strict(c == 6);
+    ASSERT_TRUE(stream->Write(request));
+  }
+  stream->WritesDone();
+  v1::IntersectResponse response;
+  uint64_t rays_hit = 0;
+  uint64_t want_hit = 0;
+  for (uint64_t c = 0; c < kChunks; ++c) {
+    ASSERT_TRUE(stream->Read(&response)) << "reply " << c;
+    EXPECT_EQ(response.sequence(), c);
+    EXPECT_EQ(response.ray_count(), chunks[c].size());
+    EXPECT_EQ(response.stats().rays(), chunks[c].size()) << "chunk " << c;
+    const std::vector<Hit> want = serial_hits(chunks[c]);
+    EXPECT_TRUE(response.hits() == hit_bytes(want)) << "chunk " << c;
+    rays_hit += response.stats().rays_hit();
+    for (const Hit& hit : want) want_hit += std::isfinite(hit.t) ? 1 : 0;
+  }
+  EXPECT_EQ(rays_hit, want_hit) << "the replies' figures must add up to the stream's";
+  EXPECT_FALSE(stream->Read(&response));
+  EXPECT_TRUE(stream->Finish().ok());
+  // The server's debug line for the stream: fewer engine calls than chunks.
+  const std::string log = server_->log();
+  const auto line = log.rfind("IntersectStream: 12 chunks");
+  ASSERT_NE(line, std::string::npos) << log;
+  const auto calls = log.find(" engine calls", line);
+  ASSERT_NE(calls, std::string::npos) << log.substr(line);
+  const auto comma = log.rfind(", ", calls);
+  const int engine_calls = std::stoi(log.substr(comma + 2, calls - comma - 2));
+  EXPECT_GE(engine_calls, 3) << "the strict chunk is traced on its own";
+  EXPECT_LT(engine_calls, static_cast<int>(kChunks)) << log.substr(line, 200);
 }
 
 TEST_F(ServerApi, ClientCancellingMidStreamCostsOnlyItsOwnWork) {

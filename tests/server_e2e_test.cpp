@@ -230,6 +230,9 @@ TEST_F(ServerE2e, ServeRejectsBadOptionsAndMissingStores) {
   r = outcore({"serve", gen_->store, "--max-message-mb", "0"});
   EXPECT_EQ(r.exit_code, 1) << r.describe();
   EXPECT_TRUE(contains(r.stderr_text, "--max-message-mb")) << r.stderr_text;
+  r = outcore({"serve", gen_->store, "--stream-group-rays", "-1"});
+  EXPECT_NE(r.exit_code, 0) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "--stream-group-rays")) << r.stderr_text;
   r = outcore({"serve", gen_->store, "--log-level", "loud"});
   EXPECT_NE(r.exit_code, 0) << r.describe();
   EXPECT_TRUE(contains(r.stderr_text, "loud")) << r.stderr_text;

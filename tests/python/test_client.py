@@ -92,6 +92,34 @@ def test_explicit_chunk_rays_streams_and_keeps_order(server, store, bounds, tmp_
     assert np.array_equal(occluded, trace(store, rays, tmp_path, any_hit=True))
 
 
+def test_large_batch_streams_by_default_in_order_and_equals_trace_bitwise(server, store, bounds, tmp_path):
+    # Fits one 64 MiB message, but batches of > 262,144 rays stream in
+    # 65,536-ray chunks (the server may trace queued chunks together).
+    rays = make_rays(bounds, 300_001, seed=21)
+    with outcore.SceneClient(server.address, timeout=120) as client:
+        before = client.stats()["requests"]
+        result = client.cast_rays(rays)
+        after = client.stats()["requests"]
+    assert after - before == 5  # ceil(300,001 / 65,536) chunks
+    assert_equals_trace_bitwise(result, trace(store, rays, tmp_path))
+    assert client.last_stats["rays"] == len(rays)
+    assert client.last_stats["rays_hit"] == int(np.isfinite(result["t_hit"]).sum())
+
+
+def test_batch_many_times_the_max_message_streams_with_any_ray_layout(small_server, store, bounds, tmp_path):
+    # 330 k rays against 1 MiB messages: 11 chunks of 32,256 rays for the hits
+    # (32 bytes each), 8 of 43,008 for occlusion (the 24-byte rays limit).
+    rays = make_rays(bounds, 330_000, seed=22, columns=6)
+    with outcore.SceneClient(small_server.address, timeout=120) as client:
+        before = client.stats()["requests"]
+        result = client.cast_rays(rays)
+        occluded = client.test_occlusions(rays)
+        requests = client.stats()["requests"] - before
+    assert requests == 11 + 8
+    assert_equals_trace_bitwise(result, trace(store, rays, tmp_path))
+    assert np.array_equal(occluded, trace(store, rays, tmp_path, any_hit=True))
+
+
 def test_oversize_unary_message_is_resource_exhausted_and_server_keeps_serving(small_server, bounds):
     rays = make_rays(bounds, 60_000, seed=13)  # ~1.9 MiB of hits in one reply
     with outcore.SceneClient(small_server.address, timeout=60, chunk_rays=len(rays)) as client:

@@ -7,7 +7,12 @@ into chunks sent over the bidirectional stream, answered in order, and put
 back together, so callers never see the message limit. The chunk size comes
 from the smaller of this client's max_message_mb and the server's
 --max-message-mb (asked once, with GetSceneInfo, the first time a batch could
-exceed it), unless chunk_rays is given.
+exceed it), unless chunk_rays is given; batches of more than 262,144 rays
+are streamed in chunks of at most 65,536 rays even when they would fit one
+message, so the wire overlaps the server's tracing. Streamed chunks are
+memoryview slices of the caller's (contiguous float32) rays, serialised one
+at a time as gRPC asks for them, and replies are copied straight into one
+preallocated result array.
 
 Thread-safety: one SceneClient may be used from several threads at once (gRPC
 channels are thread-safe); only `last_stats` is per-client and then belongs
@@ -35,6 +40,12 @@ _MESSAGE_MARGIN = 16 * 1024
 # Requests and replies below this fit any server (--max-message-mb >= 1), so
 # small batches never cost a GetSceneInfo round trip.
 _ALWAYS_FITS = 512 * 1024
+# Batches of more than _STREAM_ABOVE_RAYS rays are streamed in chunks of at
+# most _STREAM_CHUNK_RAYS even when they would fit one message: the server then
+# traces one chunk while the next one and the previous reply are on the wire
+# (the C++ client's rule, client/cpp/scene_client.cpp; docs/BENCHMARKS.md).
+_STREAM_ABOVE_RAYS = 262_144
+_STREAM_CHUNK_RAYS = 65_536
 _SERVICE = pb.DESCRIPTOR.services_by_name["SceneQuery"].full_name
 
 
@@ -210,7 +221,10 @@ class SceneClient:
             self.scene_info()
         if self._server_max_message_bytes:  # 0: a server that does not say
             limit = min(limit, self._server_max_message_bytes)
-        return max(1, (limit - _MESSAGE_MARGIN) // per_ray)
+        chunk = max(1, (limit - _MESSAGE_MARGIN) // per_ray)
+        if n > _STREAM_ABOVE_RAYS:
+            chunk = min(chunk, _STREAM_CHUNK_RAYS)
+        return chunk
 
     def _query(self, query: _Query, rays: np.ndarray, strict: bool) -> np.ndarray:
         """Answers (n, 6|8) wire rays: an (n,) array of query.record_dtype."""
@@ -265,7 +279,7 @@ class SceneClient:
         out = np.empty(n, dtype=query.record_dtype)
         out_bytes = out.view(np.uint8)
         itemsize = query.record_dtype.itemsize
-        totals: dict = {}
+        stats = []  # serialised QueryStats per chunk, summed once the stream is done
         call = self._calls[query.stream](requests, timeout=self.timeout)
         sequence = 0
         try:
@@ -282,8 +296,7 @@ class SceneClient:
                                        query.stream) from None
                 self._check_reply(query, reply, count, query.stream, sequence)
                 out_bytes[start * itemsize : (start + count) * itemsize] = reply.payload(np.uint8)
-                for key, value in _message_to_dict(pb.QueryStats.FromString(reply.stats)).items():
-                    totals[key] = totals.get(key, 0) + value
+                stats.append(reply.stats)
                 sequence += 1
         except grpc.RpcError as e:
             raise from_rpc_error(e, query.stream) from None
@@ -293,6 +306,11 @@ class SceneClient:
         if sequence != len(starts):
             raise OutcoreError("DATA_LOSS", f"stream ended after {sequence} of {len(starts)} chunks",
                                query.stream)
-        self.last_stats = totals
+        totals = pb.QueryStats()
+        for data in stats:
+            chunk_stats = pb.QueryStats.FromString(data)
+            for field in chunk_stats.DESCRIPTOR.fields:
+                setattr(totals, field.name, getattr(totals, field.name) + getattr(chunk_stats, field.name))
+        self.last_stats = _message_to_dict(totals)
         out.flags.writeable = False
         return out
