@@ -5,11 +5,13 @@
 #include <bit>
 #include <charconv>
 #include <cstdint>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "core/io/reader_test_util.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -18,15 +20,9 @@ namespace {
 using testing::TempDir;
 using testing::write_text_file;
 
+// Read with vertices in memory and again out of core; both must agree.
 Expected<std::vector<Triangle>> read_ply(const std::string& path) {
-  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<TriangleSource> source, open_ply_file(path));
-  std::vector<Triangle> triangles;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    triangles.insert(triangles.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  OUTCORE_RETURN_IF_ERROR(source->stream(sink));
-  return triangles;
+  return testing::read_both_ways(open_ply_file, path);
 }
 
 // One scalar of a PLY body: its PLY type name and value.
@@ -448,6 +444,41 @@ TEST(PlyReader, SinkErrorStopsTheStreamAndIsReturnedUnchanged) {
   EXPECT_EQ(batches, 1);
   EXPECT_EQ(status.code(), StatusCode::kCancelled);
   EXPECT_EQ(status.message(), "stopped by the test");
+}
+
+// ---- out of core (vertex_spill.h); read_ply reads every file above both ways too ----
+
+TEST(PlyReaderOutOfCore, OutOfRangeIndexNamesTheElementAndItemAndLeavesNoFiles) {
+  TempDir dir;
+  TempDir spill_dir;
+  const std::string path = dir.file("bad.ply");
+  write_ply(path, "binary_big_endian",
+            "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            "element tristrips 1\nproperty list int int vertex_indices\n",
+            {{{"float", 0}, {"float", 0}, {"float", 0}},
+             {{"float", 1}, {"float", 0}, {"float", 0}},
+             {{"float", 0}, {"float", 1}, {"float", 0}},
+             {{"int", 6}, {"int", 0}, {"int", 1}, {"int", 2}, {"int", -1}, {"int", 0}, {"int", 3}}});
+  auto source = open_ply_file(path, {testing::kSpillEveryVertex, spill_dir.path()});
+  ASSERT_TRUE(source.ok()) << source.status().to_string();
+  auto triangles = testing::stream_all(**source);
+  ASSERT_FALSE(triangles.ok());
+  EXPECT_EQ(triangles.status().message(),
+            path + ": tristrips 0: vertex index 3 out of range (3 vertices) at list position 5");
+  EXPECT_TRUE(std::filesystem::is_empty(spill_dir.path()));
+}
+
+// 3 vertices hold 36 bytes; the header's count decides.
+TEST(PlyReaderOutOfCore, SpillsOnlyWhenTheHeadersVerticesExceedTheAllowance) {
+  TempDir dir;
+  const std::string path = dir.file("triangle.ply");
+  write_text_file(path,
+                  "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                  "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                  "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  EXPECT_FALSE(testing::streams_out_of_core(open_ply_file, path, 0));
+  EXPECT_FALSE(testing::streams_out_of_core(open_ply_file, path, 36));
+  EXPECT_TRUE(testing::streams_out_of_core(open_ply_file, path, 35));
 }
 
 }  // namespace

@@ -1,0 +1,92 @@
+// Test helper for the OBJ and PLY readers: reads a file both ways, vertices
+// held in memory and faces resolved out of core (vertex_spill.h) with the
+// smallest buffers (many sort runs, merges of two runs at a time), and checks
+// that both agree bit for bit: the same triangles, or the same error, and a
+// second stream() identical to the first. Also checks that the out-of-core
+// source leaves no temporary file behind.
+//
+// Thread-safety: test code; one thread.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/io/triangle_source.h"
+#include "tests/support/test_paths.h"
+
+namespace outcore::testing {
+
+using OpenFileFn = Expected<std::unique_ptr<TriangleSource>> (*)(const std::string&, const SourceOptions&);
+
+// Forces the out-of-core path for any file with a vertex; buffers are then at
+// their minimum.
+inline constexpr uint64_t kSpillEveryVertex = 1;
+
+inline bool same_bits(const std::vector<Triangle>& a, const std::vector<Triangle>& b) {
+  return a.size() == b.size() &&
+         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Triangle)) == 0);
+}
+
+inline Expected<std::vector<Triangle>> stream_all(TriangleSource& source) {
+  std::vector<Triangle> triangles;
+  CallbackSink sink([&](std::span<const Triangle> batch) {
+    triangles.insert(triangles.end(), batch.begin(), batch.end());
+    return Status::Ok();
+  });
+  OUTCORE_RETURN_IF_ERROR(source.stream(sink));
+  return triangles;
+}
+
+inline Expected<std::vector<Triangle>> read_one_way(OpenFileFn open, const std::string& path,
+                                                    const SourceOptions& options, bool restream) {
+  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<TriangleSource> source, open(path, options));
+  auto first = stream_all(*source);
+  if (first.ok() && restream) {
+    auto second = stream_all(*source);
+    EXPECT_TRUE(second.ok()) << second.status().to_string();
+    if (second.ok()) {
+      EXPECT_TRUE(same_bits(*first, *second)) << path << ": a second stream() differs";
+    }
+  }
+  return first;
+}
+
+inline Expected<std::vector<Triangle>> read_both_ways(OpenFileFn open, const std::string& path) {
+  auto in_memory = read_one_way(open, path, {}, /*restream=*/false);
+  TempDir spill_dir;
+  auto spilled = read_one_way(open, path, {kSpillEveryVertex, spill_dir.path()}, /*restream=*/true);
+  EXPECT_TRUE(std::filesystem::is_empty(spill_dir.path())) << path << ": temporary files left behind";
+  EXPECT_EQ(in_memory.ok(), spilled.ok()) << path << ": in memory " << in_memory.status().to_string()
+                                          << ", out of core " << spilled.status().to_string();
+  if (in_memory.ok() && spilled.ok()) {
+    EXPECT_TRUE(same_bits(*in_memory, *spilled)) << path << ": out-of-core triangles differ";
+  } else if (!in_memory.ok() && !spilled.ok()) {
+    EXPECT_EQ(in_memory.status().code(), spilled.status().code()) << path;
+    EXPECT_EQ(in_memory.status().message(), spilled.status().message()) << path;
+  }
+  return in_memory;
+}
+
+// Whether a source opened with this allowance streams from its spill files:
+// they exist (in a directory under the given temp_dir) only then.
+inline bool streams_out_of_core(OpenFileFn open, const std::string& path, uint64_t allowance) {
+  TempDir spill_dir;
+  auto source = open(path, {allowance, spill_dir.path()});
+  EXPECT_TRUE(source.ok()) << source.status().to_string();
+  if (!source.ok()) return false;
+  bool spilled = false;
+  CallbackSink sink([&](std::span<const Triangle>) {
+    spilled = !std::filesystem::is_empty(spill_dir.path());
+    return Status::Ok();
+  });
+  const Status status = (*source)->stream(sink);
+  EXPECT_TRUE(status.ok()) << status.to_string();
+  return spilled;
+}
+
+}  // namespace outcore::testing
