@@ -14,8 +14,9 @@ namespace {
 
 constexpr std::size_t kKiB = 1024;
 constexpr std::size_t kMiB = 1024 * kKiB;
-// Below this an allowance is raised to it: the passes need a few buffers.
-constexpr uint64_t kMinAllowanceBytes = 16 * kKiB;
+// Below this an allowance is raised to it: the passes need a few buffers, and
+// smaller ones spend their time creating files and in tiny reads and writes.
+constexpr uint64_t kMinAllowanceBytes = 256 * kKiB;
 
 // A corner with its vertex's position, waiting to be put back in triangle order.
 struct ResolvedCorner {
