@@ -213,21 +213,8 @@ class ObjSource final : public TriangleSource {
   const std::string& description() const override { return path_; }
 
   Status stream(TriangleSink& sink) override {
-    if (spilled_ == nullptr) {
-      OUTCORE_ASSIGN_OR_RETURN(const bool fits, vertices_fit_in_memory());
-      if (fits) {
-        // On the heap: the batcher's buffer is too large for a small thread stack.
-        auto faces = std::make_unique<InMemoryFaceResolver>(sink);
-        faces->reserve_vertices(vertices_to_reserve_);
-        OUTCORE_RETURN_IF_ERROR(ObjPass<InMemoryFaceResolver>(path_, *faces).run());
-        return faces->finish();
-      }
-      SpillingFaceResolver faces(path_, options_.vertex_memory_bytes, options_.temp_dir);
-      OUTCORE_RETURN_IF_ERROR(faces.begin());
-      OUTCORE_RETURN_IF_ERROR(ObjPass<SpillingFaceResolver>(path_, faces).run());
-      OUTCORE_ASSIGN_OR_RETURN(spilled_, faces.finish());
-    }
-    return spilled_->stream(sink);
+    OUTCORE_ASSIGN_OR_RETURN(const bool fits, vertices_fit_in_memory());
+    return faces_.stream<ObjPass>(path_, options_, fits, vertices_to_reserve_, sink);
   }
 
  private:
@@ -257,7 +244,7 @@ class ObjSource final : public TriangleSource {
   SourceOptions options_;
   int fits_in_memory_ = -1;  // unknown until the first stream()
   uint64_t vertices_to_reserve_ = 0;
-  std::unique_ptr<SpilledTriangles> spilled_;  // the resolved triangles, once spilled
+  ResolvedFaces faces_;
 };
 
 }  // namespace

@@ -249,7 +249,7 @@ TEST(ObjReaderOutOfCore, OutOfRangeIndexNamesTheLineAndLeavesNoFiles) {
   write_text_file(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1 1 0\nf -1 -2 -5\n");
   auto source = open_obj_file(path, {testing::kSpillEveryVertex, spill_dir.path()});
   ASSERT_TRUE(source.ok()) << source.status().to_string();
-  auto triangles = testing::stream_all(**source);
+  auto triangles = gen_test::collect(**source);
   ASSERT_FALSE(triangles.ok());
   EXPECT_EQ(triangles.status().message(),
             path + ":6: vertex index -5 out of range (4 vertices defined so far)");

@@ -702,26 +702,15 @@ class PlySource final : public TriangleSource {
   const std::string& description() const override { return path_; }
 
   Status stream(TriangleSink& sink) override {
-    if (spilled_ == nullptr) {
-      if (!spill_) {
-        // On the heap: the batcher's buffer is too large for a small thread stack.
-        auto faces = std::make_unique<InMemoryFaceResolver>(sink);
-        OUTCORE_RETURN_IF_ERROR(PlyPass<InMemoryFaceResolver>(path_, *faces).run());
-        return faces->finish();
-      }
-      SpillingFaceResolver faces(path_, options_.vertex_memory_bytes, options_.temp_dir);
-      OUTCORE_RETURN_IF_ERROR(faces.begin());
-      OUTCORE_RETURN_IF_ERROR(PlyPass<SpillingFaceResolver>(path_, faces).run());
-      OUTCORE_ASSIGN_OR_RETURN(spilled_, faces.finish());
-    }
-    return spilled_->stream(sink);
+    // read_vertices reserves from the header's count.
+    return faces_.stream<PlyPass>(path_, options_, !spill_, /*vertices_to_reserve=*/0, sink);
   }
 
  private:
   std::string path_;
   SourceOptions options_;
-  bool spill_;                                 // the header's vertices exceed the allowance
-  std::unique_ptr<SpilledTriangles> spilled_;  // the resolved triangles, once spilled
+  bool spill_;  // the header's vertices exceed the allowance
+  ResolvedFaces faces_;
 };
 
 }  // namespace

@@ -461,7 +461,7 @@ TEST(PlyReaderOutOfCore, OutOfRangeIndexNamesTheElementAndItemAndLeavesNoFiles) 
              {{"int", 6}, {"int", 0}, {"int", 1}, {"int", 2}, {"int", -1}, {"int", 0}, {"int", 3}}});
   auto source = open_ply_file(path, {testing::kSpillEveryVertex, spill_dir.path()});
   ASSERT_TRUE(source.ok()) << source.status().to_string();
-  auto triangles = testing::stream_all(**source);
+  auto triangles = gen_test::collect(**source);
   ASSERT_FALSE(triangles.ok());
   EXPECT_EQ(triangles.status().message(),
             path + ": tristrips 0: vertex index 3 out of range (3 vertices) at list position 5");

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "core/gen/gen_test_util.h"
 #include "core/io/triangle_source.h"
 #include "tests/support/test_paths.h"
 
@@ -32,22 +33,12 @@ inline bool same_bits(const std::vector<Triangle>& a, const std::vector<Triangle
          (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(Triangle)) == 0);
 }
 
-inline Expected<std::vector<Triangle>> stream_all(TriangleSource& source) {
-  std::vector<Triangle> triangles;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    triangles.insert(triangles.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  OUTCORE_RETURN_IF_ERROR(source.stream(sink));
-  return triangles;
-}
-
 inline Expected<std::vector<Triangle>> read_one_way(OpenFileFn open, const std::string& path,
                                                     const SourceOptions& options, bool restream) {
   OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<TriangleSource> source, open(path, options));
-  auto first = stream_all(*source);
+  auto first = gen_test::collect(*source);
   if (first.ok() && restream) {
-    auto second = stream_all(*source);
+    auto second = gen_test::collect(*source);
     EXPECT_TRUE(second.ok()) << second.status().to_string();
     if (second.ok()) {
       EXPECT_TRUE(same_bits(*first, *second)) << path << ": a second stream() differs";

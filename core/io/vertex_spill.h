@@ -178,4 +178,34 @@ class SpillingFaceResolver {
   uint64_t triangle_count_ = 0;
 };
 
+// What an OBJ or PLY source keeps between stream() calls, and the choice of
+// resolver: stream<Pass>() runs Pass<Resolver>(path, resolver).run() (one
+// pass of the reader over the file) into an InMemoryFaceResolver straight to
+// the sink when the vertices fit, else, once, into a SpillingFaceResolver
+// whose triangles this and every later call then stream.
+class ResolvedFaces {
+ public:
+  template <template <class> class Pass>
+  Status stream(const std::string& path, const SourceOptions& options, bool vertices_fit,
+                uint64_t vertices_to_reserve, TriangleSink& sink) {
+    if (spilled_ == nullptr) {
+      if (vertices_fit) {
+        // On the heap: the batcher's buffer is too large for a small thread stack.
+        auto faces = std::make_unique<InMemoryFaceResolver>(sink);
+        faces->reserve_vertices(vertices_to_reserve);
+        OUTCORE_RETURN_IF_ERROR(Pass<InMemoryFaceResolver>(path, *faces).run());
+        return faces->finish();
+      }
+      SpillingFaceResolver faces(path, options.vertex_memory_bytes, options.temp_dir);
+      OUTCORE_RETURN_IF_ERROR(faces.begin());
+      OUTCORE_RETURN_IF_ERROR(Pass<SpillingFaceResolver>(path, faces).run());
+      OUTCORE_ASSIGN_OR_RETURN(spilled_, faces.finish());
+    }
+    return spilled_->stream(sink);
+  }
+
+ private:
+  std::unique_ptr<SpilledTriangles> spilled_;
+};
+
 }  // namespace outcore

@@ -22,12 +22,7 @@ Status TemporaryDirectory::create(const std::string& prefix) {
 }
 
 Status TemporaryDirectory::create_beside(const std::string& output) {
-  remove();
-  std::string pattern = output + ".partial-XXXXXX";
-  if (mkdtemp(pattern.data()) == nullptr)
-    return io_error_from_errno("cannot create a temporary directory beside " + output);
-  path_ = pattern;
-  return Status::Ok();
+  return create(output + ".partial-");
 }
 
 void TemporaryDirectory::remove() {
