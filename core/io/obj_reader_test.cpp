@@ -217,17 +217,7 @@ TEST(ObjReader, StreamingTwiceYieldsIdenticalTriangles) {
 }
 
 TEST(ObjReader, SinkErrorStopsTheStreamAndIsReturnedUnchanged) {
-  auto source = open_obj_file(testing::model_path("stanford-bunny.obj"));
-  ASSERT_TRUE(source.ok()) << source.status().to_string();
-  int batches = 0;
-  CallbackSink sink([&](std::span<const Triangle>) {
-    ++batches;
-    return resource_exhausted("sink is full");
-  });
-  const Status status = (*source)->stream(sink);
-  EXPECT_EQ(batches, 1);
-  EXPECT_EQ(status.code(), StatusCode::kResourceExhausted);
-  EXPECT_EQ(status.message(), "sink is full");
+  testing::expect_sink_error_returned_unchanged(open_obj_file, testing::model_path("stanford-bunny.obj"));
 }
 
 // ---- out of core (vertex_spill.h); read_obj reads every file above both ways too ----
@@ -244,16 +234,10 @@ TEST(ObjReaderOutOfCore, EveryModelMatchesTheInMemoryReadBitForBit) {
 
 TEST(ObjReaderOutOfCore, OutOfRangeIndexNamesTheLineAndLeavesNoFiles) {
   TempDir dir;
-  TempDir spill_dir;
   const std::string path = dir.file("bad.obj");
   write_text_file(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1 1 0\nf -1 -2 -5\n");
-  auto source = open_obj_file(path, {testing::kSpillEveryVertex, spill_dir.path()});
-  ASSERT_TRUE(source.ok()) << source.status().to_string();
-  auto triangles = gen_test::collect(**source);
-  ASSERT_FALSE(triangles.ok());
-  EXPECT_EQ(triangles.status().message(),
+  EXPECT_EQ(testing::read_out_of_core_status(open_obj_file, path).message(),
             path + ":6: vertex index -5 out of range (4 vertices defined so far)");
-  EXPECT_TRUE(std::filesystem::is_empty(spill_dir.path()));
 }
 
 // 3 vertices hold 36 bytes.
@@ -261,9 +245,7 @@ TEST(ObjReaderOutOfCore, SpillsOnlyWhenTheVerticesExceedTheAllowance) {
   TempDir dir;
   const std::string path = dir.file("triangle.obj");
   write_text_file(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-  EXPECT_FALSE(testing::streams_out_of_core(open_obj_file, path, 0));
-  EXPECT_FALSE(testing::streams_out_of_core(open_obj_file, path, 36));
-  EXPECT_TRUE(testing::streams_out_of_core(open_obj_file, path, 35));
+  testing::expect_spills_only_beyond(open_obj_file, path, 36);
 }
 
 }  // namespace

@@ -433,24 +433,13 @@ TEST(PlyReader, StreamingTwiceYieldsIdenticalTriangles) {
 }
 
 TEST(PlyReader, SinkErrorStopsTheStreamAndIsReturnedUnchanged) {
-  auto source = open_ply_file(testing::model_path("igea.ply"));
-  ASSERT_TRUE(source.ok()) << source.status().to_string();
-  int batches = 0;
-  CallbackSink sink([&](std::span<const Triangle>) {
-    ++batches;
-    return cancelled("stopped by the test");
-  });
-  const Status status = (*source)->stream(sink);
-  EXPECT_EQ(batches, 1);
-  EXPECT_EQ(status.code(), StatusCode::kCancelled);
-  EXPECT_EQ(status.message(), "stopped by the test");
+  testing::expect_sink_error_returned_unchanged(open_ply_file, testing::model_path("igea.ply"));
 }
 
 // ---- out of core (vertex_spill.h); read_ply reads every file above both ways too ----
 
 TEST(PlyReaderOutOfCore, OutOfRangeIndexNamesTheElementAndItemAndLeavesNoFiles) {
   TempDir dir;
-  TempDir spill_dir;
   const std::string path = dir.file("bad.ply");
   write_ply(path, "binary_big_endian",
             "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
@@ -459,13 +448,8 @@ TEST(PlyReaderOutOfCore, OutOfRangeIndexNamesTheElementAndItemAndLeavesNoFiles) 
              {{"float", 1}, {"float", 0}, {"float", 0}},
              {{"float", 0}, {"float", 1}, {"float", 0}},
              {{"int", 6}, {"int", 0}, {"int", 1}, {"int", 2}, {"int", -1}, {"int", 0}, {"int", 3}}});
-  auto source = open_ply_file(path, {testing::kSpillEveryVertex, spill_dir.path()});
-  ASSERT_TRUE(source.ok()) << source.status().to_string();
-  auto triangles = gen_test::collect(**source);
-  ASSERT_FALSE(triangles.ok());
-  EXPECT_EQ(triangles.status().message(),
+  EXPECT_EQ(testing::read_out_of_core_status(open_ply_file, path).message(),
             path + ": tristrips 0: vertex index 3 out of range (3 vertices) at list position 5");
-  EXPECT_TRUE(std::filesystem::is_empty(spill_dir.path()));
 }
 
 // 3 vertices hold 36 bytes; the header's count decides.
@@ -476,9 +460,7 @@ TEST(PlyReaderOutOfCore, SpillsOnlyWhenTheHeadersVerticesExceedTheAllowance) {
                   "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
                   "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
                   "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
-  EXPECT_FALSE(testing::streams_out_of_core(open_ply_file, path, 0));
-  EXPECT_FALSE(testing::streams_out_of_core(open_ply_file, path, 36));
-  EXPECT_TRUE(testing::streams_out_of_core(open_ply_file, path, 35));
+  testing::expect_spills_only_beyond(open_ply_file, path, 36);
 }
 
 }  // namespace

@@ -80,4 +80,45 @@ inline bool streams_out_of_core(OpenFileFn open, const std::string& path, uint64
   return spilled;
 }
 
+// The status of reading path out of core. After an error no spill file may
+// remain, even while the source lives on.
+inline Status read_out_of_core_status(OpenFileFn open, const std::string& path) {
+  TempDir spill_dir;
+  auto source = open(path, {kSpillEveryVertex, spill_dir.path()});
+  if (!source.ok()) return source.status();
+  const Status status = gen_test::collect(**source).status();
+  if (!status.ok()) {
+    EXPECT_TRUE(std::filesystem::is_empty(spill_dir.path())) << "temporary files left behind";
+  }
+  return status;
+}
+
+// A file whose vertices take vertex_bytes is read in memory with that much
+// allowance (or none), and out of core with a byte less.
+inline void expect_spills_only_beyond(OpenFileFn open, const std::string& path, uint64_t vertex_bytes) {
+  EXPECT_FALSE(streams_out_of_core(open, path, 0));
+  EXPECT_FALSE(streams_out_of_core(open, path, vertex_bytes));
+  EXPECT_TRUE(streams_out_of_core(open, path, vertex_bytes - 1));
+}
+
+// Both ways, a failing sink stops the stream after its first batch and its
+// status comes back unchanged.
+inline void expect_sink_error_returned_unchanged(OpenFileFn open, const std::string& path) {
+  TempDir spill_dir;
+  for (const SourceOptions& options : {SourceOptions{}, SourceOptions{kSpillEveryVertex, spill_dir.path()}}) {
+    SCOPED_TRACE(options.vertex_memory_bytes == 0 ? "in memory" : "out of core");
+    auto source = open(path, options);
+    ASSERT_TRUE(source.ok()) << source.status().to_string();
+    int batches = 0;
+    CallbackSink sink([&](std::span<const Triangle>) {
+      ++batches;
+      return resource_exhausted("sink is full");
+    });
+    const Status status = (*source)->stream(sink);
+    EXPECT_EQ(batches, 1);
+    EXPECT_EQ(status.code(), StatusCode::kResourceExhausted);
+    EXPECT_EQ(status.message(), "sink is full");
+  }
+}
+
 }  // namespace outcore::testing

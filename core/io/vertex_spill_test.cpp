@@ -112,21 +112,6 @@ TEST(SpillingFaceResolver, MissingTemporaryDirectoryFailsNamingIt) {
   EXPECT_TRUE(testing::contains(status.message(), dir.file("missing"))) << status.message();
 }
 
-TEST(SpillingFaceResolver, SinkErrorStopsTheStreamAndIsReturnedUnchanged) {
-  TempDir dir;
-  auto spilled = spill(random_mesh(100, 10000, 3), 1, dir.path());
-  ASSERT_TRUE(spilled.ok()) << spilled.status().to_string();
-  int batches = 0;
-  CallbackSink sink([&](std::span<const Triangle>) {
-    ++batches;
-    return resource_exhausted("sink is full");
-  });
-  const Status status = (*spilled)->stream(sink);
-  EXPECT_EQ(batches, 1);
-  EXPECT_EQ(status.code(), StatusCode::kResourceExhausted);
-  EXPECT_EQ(status.message(), "sink is full");
-}
-
 TEST(SpillingFaceResolver, PlanStaysWithinTheAllowance) {
   for (const uint64_t mib : {1, 4, 8, 128, 1024}) {
     SCOPED_TRACE(std::to_string(mib) + " MiB");
