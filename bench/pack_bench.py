@@ -31,11 +31,11 @@ def run_dd(path, gib):
     return gib * 1024**3 / seconds
 
 
-def run_pack(binary, spec, out, mem_mb, brick_tris):
+def run_pack(binary, spec, out, mem_mb, brick_tris, extra_args=()):
     shutil.rmtree(out, ignore_errors=True)
     t0 = time.monotonic()
     proc = subprocess.Popen([binary, "pack", spec, "-o", out, "--mem-mb", str(mem_mb), "--brick-tris",
-                             str(brick_tris)], stdout=subprocess.PIPE, stderr=None, text=True)
+                             str(brick_tris), *extra_args], stdout=subprocess.PIPE, stderr=None, text=True)
     stdout = proc.stdout.read()
     _, status, rusage = os.wait4(proc.pid, 0)
     seconds = time.monotonic() - t0

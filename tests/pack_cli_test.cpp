@@ -380,5 +380,79 @@ TEST(PackCliMemory, PeakRssStaysWithinMemMbPlusFixedOverheadAndResultMatchesAnIn
   EXPECT_EQ(differing, 0u) << "triangles stored differently by the out-of-core and in-memory packs";
 }
 
+// A side x side grid of vertices written in a scrambled order (file position
+// f holds grid vertex f * kStride mod n), then one triangle (i, i+1, i+side)
+// for every third grid cell, so faces index vertices all over the file as in
+// a large scan. Returns the triangle count.
+uint64_t write_scrambled_grid_obj(const std::string& path, uint32_t side) {
+  const uint64_t n = uint64_t{side} * side;
+  constexpr uint64_t kStride = 1'000'003;  // prime, so coprime with n: a permutation
+  EXPECT_NE(n % kStride, 0u);
+  std::vector<uint32_t> file_index(n);  // 1-based OBJ index of each grid vertex
+  std::FILE* file = std::fopen(path.c_str(), "w");
+  EXPECT_NE(file, nullptr) << path;
+  if (file == nullptr) return 0;
+  std::vector<char> text;
+  const auto flush = [&] {
+    EXPECT_EQ(std::fwrite(text.data(), 1, text.size(), file), text.size());
+    text.clear();
+  };
+  char line[96];
+  for (uint64_t f = 0; f < n; ++f) {
+    const uint64_t g = f * kStride % n;
+    file_index[g] = static_cast<uint32_t>(f + 1);
+    const int length = std::snprintf(line, sizeof line, "v %u %u.5 %u\n", static_cast<unsigned>(g % side),
+                                     static_cast<unsigned>(g / side), static_cast<unsigned>(g % 7));
+    text.insert(text.end(), line, line + length);
+    if (text.size() > (1u << 20)) flush();
+  }
+  uint64_t triangles = 0;
+  for (uint64_t g = 0; g + side + 1 < n; g += 3) {
+    if (g % side == side - 1) continue;  // the last column has no cell
+    const int length = std::snprintf(line, sizeof line, "f %u %u %u\n", file_index[g], file_index[g + 1],
+                                     file_index[g + side]);
+    text.insert(text.end(), line, line + length);
+    if (text.size() > (1u << 20)) flush();
+    ++triangles;
+  }
+  flush();
+  EXPECT_EQ(std::fclose(file), 0);
+  return triangles;
+}
+
+// Vertex positions alone (4 M vertices, 48 MB) exceed the whole 32 MiB budget;
+// the reader resolves the faces out of core, so the bound holds.
+TEST(PackCliMemory, IndexedObjWithMoreVertexBytesThanMemMbStaysWithinTheBoundAndMatchesAnInMemoryPack) {
+  TempDir out;
+  const std::string obj = out.file("scrambled-grid.obj");
+  const uint64_t triangles = write_scrambled_grid_obj(obj, 2000);
+  const uint64_t mem_mb = kMinPackMemoryMb;
+  ASSERT_GT(2000ull * 2000 * sizeof(Vec3f), mem_mb * kMiB);
+  const auto small =
+      outcore({"pack", obj, "-o", out.file("small"), "--mem-mb", std::to_string(mem_mb), "-q", "--no-sync"});
+  ASSERT_TRUE(small.succeeded()) << small.describe();
+  EXPECT_GT(small.peak_rss_bytes, 0u);
+#ifndef OUTCORE_SANITIZE_BUILD  // sanitizer shadow memory and quarantine dwarf the bound
+  EXPECT_LE(small.peak_rss_bytes, (mem_mb + kPackFixedOverheadMiB) * kMiB)
+      << "peak RSS " << small.peak_rss_bytes / kMiB << " MiB";
+  EXPECT_LT(small.peak_rss_bytes, 2000ull * 2000 * sizeof(Vec3f)) << "less than the positions alone";
+#endif
+  // The default budget holds the vertices in memory.
+  const auto large = outcore({"pack", obj, "-o", out.file("large"), "-q", "--no-sync"});
+  ASSERT_TRUE(large.succeeded()) << large.describe();
+  std::printf(
+      "pack of a %llu-triangle OBJ with 4 M vertices: peak RSS %.1f MiB at --mem-mb %llu, %.1f MiB at "
+      "the default\n",
+      static_cast<unsigned long long>(triangles), static_cast<double>(small.peak_rss_bytes) / kMiB,
+      static_cast<unsigned long long>(mem_mb), static_cast<double>(large.peak_rss_bytes) / kMiB);
+  EXPECT_EQ(entries(out.path()), (std::vector<std::string>{"large", "scrambled-grid.obj", "small"}));
+
+  const std::vector<uint64_t> a = triangle_fingerprints(out.file("small"), triangles);
+  const std::vector<uint64_t> b = triangle_fingerprints(out.file("large"), triangles);
+  ASSERT_EQ(a.size(), triangles);
+  ASSERT_EQ(b.size(), triangles);
+  EXPECT_TRUE(a == b) << "triangles stored differently by the out-of-core and in-memory reads";
+}
+
 }  // namespace
 }  // namespace outcore

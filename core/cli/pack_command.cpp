@@ -32,6 +32,10 @@ void add_pack_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--mem-mb", options->memory_mb, "Peak memory bound for packing, MiB")
       ->capture_default_str();
+  cmd->add_option("--vertex-mem-mb", options->vertex_memory_mb,
+                  "Part of --mem-mb for OBJ/PLY vertex positions, MiB (0: an eighth); files with more "
+                  "resolve their faces out of core")
+      ->capture_default_str();
   cmd->add_flag("--force", options->overwrite, "Replace an existing store at the output path");
   auto no_sync = std::make_shared<bool>(false);
   cmd->add_flag("--no-sync", *no_sync, "Skip fsync before the final rename (faster, not durable)");

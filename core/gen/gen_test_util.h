@@ -1,6 +1,6 @@
-// Test helpers for the generator tests (core/gen/*_test.cpp only): collect a
-// source's triangles, check closed and consistently oriented meshes, a sink
-// that fails on purpose.
+// Test helpers for the generator tests (core/gen/*_test.cpp; the file reader
+// tests use collect() too): collect a source's triangles, check closed and consistently oriented meshes, a
+// sink that fails on purpose.
 //
 // Thread-safety: plain functions and test-local objects.
 #pragma once

@@ -11,20 +11,25 @@
 // p, unknown keywords), comments and blank lines are ignored. A '#' starting a
 // token ends the statement (trailing comments).
 //
-// Vertices are kept (12 bytes each: faces may index any earlier vertex); faces
-// are streamed, and the file is read through a bounded buffer. A face may only
-// use vertices defined above it, so the file is read in one pass.
+// Faces may index any earlier vertex, so positions are needed at random: when
+// they fit in the source's allowance (SourceOptions::vertex_memory_bytes) they
+// are kept (12 bytes each) and faces stream as they are read; otherwise the
+// first stream() resolves the faces out of core (vertex_spill.h) into a
+// triangle file that every stream() then reads. Either way the file is read
+// through a bounded buffer, in one pass, as a face may only use vertices
+// defined above it.
 #include "core/io/obj_reader.h"
 
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <memory>
 #include <string_view>
 #include <system_error>
-#include <vector>
 
 #include "core/io/text_line_reader.h"
+#include "core/io/vertex_spill.h"
 
 namespace outcore {
 
@@ -62,11 +67,12 @@ bool parse_leading_integer(const char*& cursor, const char* last, std::int64_t& 
   return true;
 }
 
-// State of one pass over the file; one per stream() call so that calls are
-// independent and yield identical triangles.
+// State of one pass over the file into a face resolver (vertex_spill.h); one per
+// stream() call so that calls are independent and yield identical triangles.
+template <class FaceResolver>
 class ObjPass {
  public:
-  ObjPass(const std::string& path, TriangleSink& sink) : path_(path), batcher_(sink) {}
+  ObjPass(const std::string& path, FaceResolver& faces) : path_(path), faces_(faces) {}
 
   Status run() {
     OUTCORE_RETURN_IF_ERROR(reader_.open(path_));
@@ -81,8 +87,7 @@ class ObjPass {
         OUTCORE_RETURN_IF_ERROR(parse_face(tokens));
       }
     }
-    OUTCORE_RETURN_IF_ERROR(reader_.status());
-    return batcher_.finish();
+    return reader_.status();
   }
 
  private:
@@ -119,12 +124,11 @@ class ObjPass {
         return error("expected a number, got '" + std::string(token) + "'");
       }
     }
-    vertices_.push_back(position);
-    return Status::Ok();
+    return faces_.add_vertex(position);
   }
 
-  // Resolves one face corner to a 0-based index into vertices_.
-  Status parse_corner(std::string_view token, std::size_t& index) const {
+  // Resolves one face corner to a 0-based vertex index.
+  Status parse_corner(std::string_view token, uint64_t& index) const {
     const char* cursor = token.data();
     const char* last = cursor + token.size();
     std::int64_t vertex = 0;
@@ -147,29 +151,28 @@ class ObjPass {
     if (!well_formed) {
       return error("expected a vertex index (v, v/vt, v//vn or v/vt/vn), got '" + std::string(token) + "'");
     }
-    const auto defined = static_cast<std::int64_t>(vertices_.size());
+    const auto defined = static_cast<std::int64_t>(faces_.vertex_count());
     if (vertex == 0) return error("vertex index 0 is invalid (OBJ indices start at 1)");
     if (vertex > defined || vertex < -defined) {
       return error("vertex index " + std::to_string(vertex) + " out of range (" + std::to_string(defined) +
                    " vertices defined so far)");
     }
-    index = static_cast<std::size_t>(vertex > 0 ? vertex - 1 : defined + vertex);
+    index = static_cast<uint64_t>(vertex > 0 ? vertex - 1 : defined + vertex);
     return Status::Ok();
   }
 
   // Fans the corners out as they are read: corner j >= 2 closes triangle
   // (c0, c(j-1), cj), so no per-face storage is needed.
   Status parse_face(StatementTokens& tokens) {
-    std::size_t first = 0, previous = 0, corners = 0;
+    uint64_t first = 0, previous = 0, corners = 0;
     std::string_view token;
     while (tokens.next(token)) {
-      std::size_t index = 0;
+      uint64_t index = 0;
       OUTCORE_RETURN_IF_ERROR(parse_corner(token, index));
       if (corners == 0) {
         first = index;
       } else if (corners >= 2) {
-        OUTCORE_RETURN_IF_ERROR(
-            batcher_.add(Triangle{vertices_[first], vertices_[previous], vertices_[index]}));
+        OUTCORE_RETURN_IF_ERROR(faces_.add_triangle(first, previous, index));
       }
       previous = index;
       ++corners;
@@ -183,31 +186,73 @@ class ObjPass {
 
   const std::string& path_;
   TextLineReader reader_;
-  std::vector<Vec3f> vertices_;
-  TriangleBatcher batcher_;
+  FaceResolver& faces_;
 };
+
+// How many `v` statements the file has, counting no further than limit + 1
+// (enough to know that they do not fit). Only decides the path to take, so
+// it just looks at each line's first token.
+Expected<uint64_t> count_vertex_statements(const std::string& path, uint64_t limit) {
+  TextLineReader reader;
+  OUTCORE_RETURN_IF_ERROR(reader.open(path));
+  uint64_t count = 0;
+  std::string_view line;
+  while (count <= limit && reader.next_line(line)) {
+    std::size_t i = 0;
+    while (i < line.size() && is_blank(line[i])) ++i;
+    count += i < line.size() && line[i] == 'v' && (i + 1 == line.size() || is_blank(line[i + 1]));
+  }
+  OUTCORE_RETURN_IF_ERROR(reader.status());
+  return count;
+}
 
 class ObjSource final : public TriangleSource {
  public:
-  explicit ObjSource(std::string path) : path_(std::move(path)) {}
+  ObjSource(std::string path, SourceOptions options) : path_(std::move(path)), options_(std::move(options)) {}
 
   const std::string& description() const override { return path_; }
 
   Status stream(TriangleSink& sink) override {
-    // On the heap: the batcher's buffer is too large for a small thread stack.
-    auto pass = std::make_unique<ObjPass>(path_, sink);
-    return pass->run();
+    OUTCORE_ASSIGN_OR_RETURN(const bool fits, vertices_fit_in_memory());
+    return faces_.stream<ObjPass>(path_, options_, fits, vertices_to_reserve_, sink);
   }
 
  private:
+  // Decided once per source. A vertex statement takes at least 8 bytes
+  // ("v 0 0 0\n"), so a small file cannot exceed the allowance and is not
+  // counted; a larger one is counted up to the allowance.
+  Expected<bool> vertices_fit_in_memory() {
+    if (fits_in_memory_ >= 0) return fits_in_memory_ == 1;
+    const uint64_t allowance = options_.vertex_memory_bytes / sizeof(Vec3f);
+    bool fits = true;
+    if (options_.vertex_memory_bytes > 0) {
+      std::error_code ec;
+      const uint64_t most = std::filesystem::file_size(path_, ec) / 8;
+      if (ec || most > allowance) {
+        OUTCORE_ASSIGN_OR_RETURN(const uint64_t counted, count_vertex_statements(path_, allowance));
+        fits = counted <= allowance;
+        vertices_to_reserve_ = counted;
+      } else {
+        vertices_to_reserve_ = most;  // untouched capacity costs no memory
+      }
+    }
+    fits_in_memory_ = fits ? 1 : 0;
+    return fits;
+  }
+
   std::string path_;
+  SourceOptions options_;
+  int fits_in_memory_ = -1;  // unknown until the first stream()
+  uint64_t vertices_to_reserve_ = 0;
+  ResolvedFaces faces_;
 };
 
 }  // namespace
 
-Expected<std::unique_ptr<TriangleSource>> open_obj_file(const std::string& path) {
+Expected<std::unique_ptr<TriangleSource>> open_obj_file(const std::string& path,
+                                                        const SourceOptions& options) {
   OUTCORE_RETURN_IF_ERROR(check_readable_file(path));
-  return std::unique_ptr<TriangleSource>(std::make_unique<ObjSource>(path));
+  return std::unique_ptr<TriangleSource>(std::make_unique<ObjSource>(path, options));
 }
 
 }  // namespace outcore

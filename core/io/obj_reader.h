@@ -12,7 +12,9 @@
 namespace outcore {
 
 // Fails with NOT_FOUND if the file cannot be opened. Parse errors surface from
-// stream() as "path:line: what".
-Expected<std::unique_ptr<TriangleSource>> open_obj_file(const std::string& path);
+// stream() as "path:line: what". options bound the memory for vertices; a file
+// with more resolves its faces out of core on the first stream().
+Expected<std::unique_ptr<TriangleSource>> open_obj_file(const std::string& path,
+                                                        const SourceOptions& options = {});
 
 }  // namespace outcore

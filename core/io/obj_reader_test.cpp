@@ -2,9 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
+#include "core/io/reader_test_util.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -13,15 +15,9 @@ namespace {
 using testing::TempDir;
 using testing::write_text_file;
 
+// Read with vertices in memory and again out of core; both must agree.
 Expected<std::vector<Triangle>> read_obj(const std::string& path) {
-  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<TriangleSource> source, open_obj_file(path));
-  std::vector<Triangle> triangles;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    triangles.insert(triangles.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  OUTCORE_RETURN_IF_ERROR(source->stream(sink));
-  return triangles;
+  return testing::read_both_ways(open_obj_file, path);
 }
 
 // The status of reading an OBJ holding text, and the path it was written to.
@@ -221,17 +217,35 @@ TEST(ObjReader, StreamingTwiceYieldsIdenticalTriangles) {
 }
 
 TEST(ObjReader, SinkErrorStopsTheStreamAndIsReturnedUnchanged) {
-  auto source = open_obj_file(testing::model_path("stanford-bunny.obj"));
-  ASSERT_TRUE(source.ok()) << source.status().to_string();
-  int batches = 0;
-  CallbackSink sink([&](std::span<const Triangle>) {
-    ++batches;
-    return resource_exhausted("sink is full");
-  });
-  const Status status = (*source)->stream(sink);
-  EXPECT_EQ(batches, 1);
-  EXPECT_EQ(status.code(), StatusCode::kResourceExhausted);
-  EXPECT_EQ(status.message(), "sink is full");
+  testing::expect_sink_error_returned_unchanged(open_obj_file, testing::model_path("stanford-bunny.obj"));
+}
+
+// ---- out of core (vertex_spill.h); read_obj reads every file above both ways too ----
+
+TEST(ObjReaderOutOfCore, EveryModelMatchesTheInMemoryReadBitForBit) {
+  for (const char* name :
+       {"stanford-bunny.obj", "beast.obj", "fandisk.obj", "homer.obj", "spot.obj", "teapot.obj"}) {
+    SCOPED_TRACE(name);
+    auto triangles = read_obj(testing::model_path(name));
+    ASSERT_TRUE(triangles.ok()) << triangles.status().to_string();
+    EXPECT_GT(triangles->size(), 0u);
+  }
+}
+
+TEST(ObjReaderOutOfCore, OutOfRangeIndexNamesTheLineAndLeavesNoFiles) {
+  TempDir dir;
+  const std::string path = dir.file("bad.obj");
+  write_text_file(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1 1 0\nf -1 -2 -5\n");
+  EXPECT_EQ(testing::read_out_of_core_status(open_obj_file, path).message(),
+            path + ":6: vertex index -5 out of range (4 vertices defined so far)");
+}
+
+// 3 vertices hold 36 bytes.
+TEST(ObjReaderOutOfCore, SpillsOnlyWhenTheVerticesExceedTheAllowance) {
+  TempDir dir;
+  const std::string path = dir.file("triangle.obj");
+  write_text_file(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  testing::expect_spills_only_beyond(open_obj_file, path, 36);
 }
 
 }  // namespace

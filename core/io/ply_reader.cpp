@@ -1,6 +1,9 @@
 // PLY reader: header, then the elements in file order. The `vertex` element's
-// x, y, z (any numeric type, converted to float) are kept, 12 bytes a vertex;
-// `face` (list vertex_indices or vertex_index) and `tristrips` (list
+// x, y, z (any numeric type, converted to float) are kept, 12 bytes a vertex,
+// when the header's vertex count fits the source's allowance
+// (SourceOptions::vertex_memory_bytes); otherwise the first stream() resolves
+// the faces out of core (vertex_spill.h) into a triangle file that every
+// stream() then reads. `face` (list vertex_indices or vertex_index) and `tristrips` (list
 // vertex_indices, -1 restarts a strip) are streamed as triangles; every other
 // property and element is read past (list properties too, which is why binary
 // files need the full header). Faces may only use vertices already read, so
@@ -31,6 +34,7 @@
 #include <vector>
 
 #include "core/io/text_line_reader.h"
+#include "core/io/vertex_spill.h"
 
 namespace outcore {
 
@@ -511,11 +515,12 @@ class AsciiBody {
   std::string problem_;
 };
 
-// State of one pass over the file; one per stream() call so that calls are
-// independent and yield identical triangles.
+// State of one pass over the file into a face resolver (vertex_spill.h); one per
+// stream() call so that calls are independent and yield identical triangles.
+template <class FaceResolver>
 class PlyPass {
  public:
-  PlyPass(const std::string& path, TriangleSink& sink) : path_(path), batcher_(sink) {}
+  PlyPass(const std::string& path, FaceResolver& faces) : path_(path), faces_(faces) {}
 
   Status run() {
     OUTCORE_RETURN_IF_ERROR(reader_.open(path_));
@@ -531,8 +536,7 @@ class PlyPass {
       BinaryBody body(reader_, header_.format == PlyFormat::kBinaryBigEndian);
       OUTCORE_RETURN_IF_ERROR(read_elements(body));
     }
-    OUTCORE_RETURN_IF_ERROR(reader_.status());
-    return batcher_.finish();
+    return reader_.status();
   }
 
  private:
@@ -586,8 +590,7 @@ class PlyPass {
   Status read_vertices(Body& body, const PlyElement& element) {
     static constexpr char kAxes[] = "xyz";
     // Capped: the count is the file's claim, not yet checked against its size.
-    vertices_.reserve(
-        static_cast<std::size_t>(std::min<std::uint64_t>(element.count, std::uint64_t{1} << 24)));
+    faces_.reserve_vertices(std::min<std::uint64_t>(element.count, std::uint64_t{1} << 24));
     for (std::uint64_t item = 0; item < element.count; ++item) {
       double xyz[3] = {0, 0, 0};
       ReadResult result = body.begin_item();
@@ -611,7 +614,7 @@ class PlyPass {
                                 format_number(xyz[axis]) + ")");
         }
       }
-      vertices_.push_back(position);
+      OUTCORE_RETURN_IF_ERROR(faces_.add_vertex(position));
     }
     return Status::Ok();
   }
@@ -622,7 +625,7 @@ class PlyPass {
   template <class Body>
   Status read_polygons(Body& body, const PlyElement& element) {
     const bool strips = element.role == ElementRole::kTriStrips;
-    const auto vertex_count = static_cast<std::int64_t>(vertices_.size());
+    const auto vertex_count = static_cast<std::int64_t>(faces_.vertex_count());
     for (std::uint64_t item = 0; item < element.count; ++item) {
       ReadResult result = body.begin_item();
       for (std::size_t p = 0; result == ReadResult::kOk && p < element.properties.size(); ++p) {
@@ -644,7 +647,7 @@ class PlyPass {
         }
         // Corners of the current face or strip: the first (faces) or the two
         // before (strips), and how many have been read.
-        std::size_t a = 0, b = 0;
+        std::uint64_t a = 0, b = 0;
         std::int64_t in_strip = 0;
         for (std::int64_t j = 0; j < count; ++j) {
           std::int64_t index = 0;
@@ -660,12 +663,10 @@ class PlyPass {
                                   std::to_string(vertex_count) + " vertices)" +
                                   (strips ? " at list position " + std::to_string(j) : std::string()));
           }
-          const auto c = static_cast<std::size_t>(index);
+          const auto c = static_cast<std::uint64_t>(index);
           if (in_strip >= 2) {
             const bool flip = strips && (in_strip - 2) % 2 == 1;
-            const Triangle triangle = flip ? Triangle{vertices_[b], vertices_[a], vertices_[c]}
-                                           : Triangle{vertices_[a], vertices_[b], vertices_[c]};
-            OUTCORE_RETURN_IF_ERROR(batcher_.add(triangle));
+            OUTCORE_RETURN_IF_ERROR(flip ? faces_.add_triangle(b, a, c) : faces_.add_triangle(a, b, c));
           }
           if (strips) {
             a = b;
@@ -687,36 +688,45 @@ class PlyPass {
   const std::string& path_;
   TextLineReader reader_;
   PlyHeader header_;
-  std::vector<Vec3f> vertices_;
-  TriangleBatcher batcher_;
+  FaceResolver& faces_;
 };
 
 class PlySource final : public TriangleSource {
  public:
-  explicit PlySource(std::string path) : path_(std::move(path)) {}
+  PlySource(std::string path, const SourceOptions& options, std::uint64_t vertex_count)
+      : path_(std::move(path)),
+        options_(options),
+        spill_(options.vertex_memory_bytes > 0 &&
+               vertex_count > options.vertex_memory_bytes / sizeof(Vec3f)) {}
 
   const std::string& description() const override { return path_; }
 
   Status stream(TriangleSink& sink) override {
-    // On the heap: the batcher's buffer is too large for a small thread stack.
-    auto pass = std::make_unique<PlyPass>(path_, sink);
-    return pass->run();
+    // read_vertices reserves from the header's count.
+    return faces_.stream<PlyPass>(path_, options_, !spill_, /*vertices_to_reserve=*/0, sink);
   }
 
  private:
   std::string path_;
+  SourceOptions options_;
+  bool spill_;  // the header's vertices exceed the allowance
+  ResolvedFaces faces_;
 };
 
 }  // namespace
 
-Expected<std::unique_ptr<TriangleSource>> open_ply_file(const std::string& path) {
+Expected<std::unique_ptr<TriangleSource>> open_ply_file(const std::string& path,
+                                                        const SourceOptions& options) {
   // The header is checked now so that a wrong file fails before any work; each
   // stream() reads it again, as the body cannot be read without it.
   TextLineReader reader;
   OUTCORE_RETURN_IF_ERROR(reader.open(path));
   OUTCORE_ASSIGN_OR_RETURN(PlyHeader header, parse_header(reader));
-  (void)header;
-  return std::unique_ptr<TriangleSource>(std::make_unique<PlySource>(path));
+  std::uint64_t vertex_count = 0;
+  for (const PlyElement& element : header.elements) {
+    if (element.role == ElementRole::kVertices) vertex_count = element.count;
+  }
+  return std::unique_ptr<TriangleSource>(std::make_unique<PlySource>(path, options, vertex_count));
 }
 
 }  // namespace outcore

@@ -5,11 +5,13 @@
 #include <bit>
 #include <charconv>
 #include <cstdint>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "core/io/reader_test_util.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -18,15 +20,9 @@ namespace {
 using testing::TempDir;
 using testing::write_text_file;
 
+// Read with vertices in memory and again out of core; both must agree.
 Expected<std::vector<Triangle>> read_ply(const std::string& path) {
-  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<TriangleSource> source, open_ply_file(path));
-  std::vector<Triangle> triangles;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    triangles.insert(triangles.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  OUTCORE_RETURN_IF_ERROR(source->stream(sink));
-  return triangles;
+  return testing::read_both_ways(open_ply_file, path);
 }
 
 // One scalar of a PLY body: its PLY type name and value.
@@ -437,17 +433,34 @@ TEST(PlyReader, StreamingTwiceYieldsIdenticalTriangles) {
 }
 
 TEST(PlyReader, SinkErrorStopsTheStreamAndIsReturnedUnchanged) {
-  auto source = open_ply_file(testing::model_path("igea.ply"));
-  ASSERT_TRUE(source.ok()) << source.status().to_string();
-  int batches = 0;
-  CallbackSink sink([&](std::span<const Triangle>) {
-    ++batches;
-    return cancelled("stopped by the test");
-  });
-  const Status status = (*source)->stream(sink);
-  EXPECT_EQ(batches, 1);
-  EXPECT_EQ(status.code(), StatusCode::kCancelled);
-  EXPECT_EQ(status.message(), "stopped by the test");
+  testing::expect_sink_error_returned_unchanged(open_ply_file, testing::model_path("igea.ply"));
+}
+
+// ---- out of core (vertex_spill.h); read_ply reads every file above both ways too ----
+
+TEST(PlyReaderOutOfCore, OutOfRangeIndexNamesTheElementAndItemAndLeavesNoFiles) {
+  TempDir dir;
+  const std::string path = dir.file("bad.ply");
+  write_ply(path, "binary_big_endian",
+            "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            "element tristrips 1\nproperty list int int vertex_indices\n",
+            {{{"float", 0}, {"float", 0}, {"float", 0}},
+             {{"float", 1}, {"float", 0}, {"float", 0}},
+             {{"float", 0}, {"float", 1}, {"float", 0}},
+             {{"int", 6}, {"int", 0}, {"int", 1}, {"int", 2}, {"int", -1}, {"int", 0}, {"int", 3}}});
+  EXPECT_EQ(testing::read_out_of_core_status(open_ply_file, path).message(),
+            path + ": tristrips 0: vertex index 3 out of range (3 vertices) at list position 5");
+}
+
+// 3 vertices hold 36 bytes; the header's count decides.
+TEST(PlyReaderOutOfCore, SpillsOnlyWhenTheHeadersVerticesExceedTheAllowance) {
+  TempDir dir;
+  const std::string path = dir.file("triangle.ply");
+  write_text_file(path,
+                  "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                  "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                  "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  testing::expect_spills_only_beyond(open_ply_file, path, 36);
 }
 
 }  // namespace

@@ -20,13 +20,15 @@ std::string lower_extension(const std::string& path) {
 }
 }  // namespace
 
-Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string& spec) {
+Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string& spec,
+                                                               const SourceOptions& options) {
   if (spec.rfind("gen:", 0) == 0) return make_generator(spec);
   const std::string ext = lower_extension(spec);
-  if (ext == ".obj") return open_obj_file(spec);
-  if (ext == ".ply") return open_ply_file(spec);
-  return invalid_argument("input '" + spec +
-                          "': unsupported input kind (expected a .obj or .ply file, or gen:NAME?key=value&...)");
+  if (ext == ".obj") return open_obj_file(spec, options);
+  if (ext == ".ply") return open_ply_file(spec, options);
+  return invalid_argument(
+      "input '" + spec +
+      "': unsupported input kind (expected a .obj or .ply file, or gen:NAME?key=value&...)");
 }
 
 }  // namespace outcore

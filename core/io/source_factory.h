@@ -12,6 +12,8 @@
 
 namespace outcore {
 
-Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string& spec);
+// options reach the file readers (memory for vertices, temporary directory).
+Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string& spec,
+                                                               const SourceOptions& options = {});
 
 }  // namespace outcore

@@ -15,6 +15,7 @@
 
 #include <array>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
@@ -23,6 +24,18 @@
 #include "core/util/status.h"
 
 namespace outcore {
+
+// How a file reader may use memory and disk. The packer derives these from its
+// --mem-mb budget and its temporary directory; the defaults (no limit) suit a
+// quick look at a small input.
+struct SourceOptions {
+  // Most bytes an OBJ or PLY reader may hold for vertex positions (12 B per
+  // vertex) and, when the file has more, for resolving its faces out of core
+  // (core/io/vertex_spill.h). 0: no limit, vertices are always held.
+  uint64_t vertex_memory_bytes = 0;
+  // Where out-of-core readers keep their temporary files; empty: $TMPDIR or /tmp.
+  std::string temp_dir;
+};
 
 class TriangleSink {
  public:

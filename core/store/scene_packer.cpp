@@ -31,6 +31,7 @@
 #include "core/util/checksum.h"
 #include "core/util/process_stats.h"
 #include "core/util/progress.h"
+#include "core/util/temporary_directory.h"
 
 namespace outcore {
 
@@ -48,13 +49,17 @@ struct MemoryPlan {
   uint64_t read_chunk;          // spill reads
   uint64_t spill_buffers;       // shared by all spill writers of one level
   uint64_t batches = 4 * kMiB;  // source and packed batches, filters
+  // OBJ/PLY readers: vertex positions, or the buffers that resolve faces out
+  // of core when a file's vertices exceed this (SourceOptions). Held whenever a
+  // file input streams, so also while a group is in memory.
+  uint64_t source_vertices;
   // Generated inputs only (pack_generated): the chunk table, the filter
   // pipeline's per-token chunk buffers, and each cell's subgroup.
   uint64_t chunk_table = 0;
   uint64_t filter_buffers = 0;
   uint64_t reserved() const {
     return uint64_t{grid_cells} * (sizeof(CellStats) + 2 * sizeof(uint32_t)) + 2 * brick_buffer + staging +
-           2 * read_chunk + spill_buffers + batches + chunk_table + filter_buffers;
+           2 * read_chunk + spill_buffers + batches + source_vertices + chunk_table + filter_buffers;
   }
   static MemoryPlan for_budget(uint64_t budget) {
     MemoryPlan plan{};
@@ -64,6 +69,7 @@ struct MemoryPlan {
     plan.staging = std::clamp<uint64_t>(budget / 128, 64 * 1024, kMiB);
     plan.read_chunk = std::clamp<uint64_t>(budget / 64, 256 * 1024, 4 * kMiB);
     plan.spill_buffers = budget / 16;
+    plan.source_vertices = budget / 8;
     return plan;
   }
 };
@@ -140,29 +146,6 @@ struct SourceStream {
 // Which group a triangle (and its position in the stream) belongs to.
 using GroupFn = std::function<uint32_t(const PackedTriangle&, uint64_t)>;
 
-// Removes the temporary directory unless the pack succeeded.
-class TemporaryDirectory {
- public:
-  ~TemporaryDirectory() {
-    if (!path_.empty()) {
-      std::error_code ec;
-      fs::remove_all(path_, ec);
-    }
-  }
-  Status create_beside(const std::string& output) {
-    std::string pattern = output + ".partial-XXXXXX";
-    if (mkdtemp(pattern.data()) == nullptr)
-      return io_error_from_errno("cannot create a temporary directory beside " + output);
-    path_ = pattern;
-    return Status::Ok();
-  }
-  const std::string& path() const { return path_; }
-  void release() { path_.clear(); }
-
- private:
-  std::string path_;
-};
-
 struct ScanResult {
   std::vector<InputRecord> inputs;
   uint64_t triangles = 0;
@@ -179,7 +162,7 @@ class ScenePacker {
 
  private:
   Status validate_options() const;
-  Status open_sources();
+  Status open_sources(const SourceOptions& source_options);
   Status scan();
   PackedStream input_stream();
   Status pack_stream(const SourceStream& source, uint64_t count, const Aabb& centroid_bounds, uint32_t depth);
@@ -233,6 +216,11 @@ Status ScenePacker::validate_options() const {
     return invalid_argument("--mem-mb must be at least " + std::to_string(kMinPackMemoryMb) + ", got " +
                             std::to_string(options_.memory_mb));
   }
+  if (options_.vertex_memory_mb > options_.memory_mb / 2) {
+    return invalid_argument("--vertex-mem-mb must be at most half of --mem-mb (" +
+                            std::to_string(options_.memory_mb / 2) + "), got " +
+                            std::to_string(options_.vertex_memory_mb));
+  }
   if (options_.inputs.size() >= 0xffffffffull) return invalid_argument("too many inputs");
   std::error_code ec;
   if (fs::exists(options_.output, ec) && !options_.overwrite) {
@@ -241,9 +229,9 @@ Status ScenePacker::validate_options() const {
   return Status::Ok();
 }
 
-Status ScenePacker::open_sources() {
+Status ScenePacker::open_sources(const SourceOptions& source_options) {
   for (const std::string& spec : options_.inputs) {
-    auto source = open_triangle_source(spec);
+    auto source = open_triangle_source(spec, source_options);
     if (!source.ok()) return source.status();
     sources_.push_back(std::move(source).value());
   }
@@ -973,15 +961,24 @@ Status ScenePacker::pack_generated() {
 Expected<PackSummary> ScenePacker::run() {
   const auto start = std::chrono::steady_clock::now();
   OUTCORE_RETURN_IF_ERROR(validate_options());
-  OUTCORE_RETURN_IF_ERROR(open_sources());
   const uint64_t budget = options_.memory_mb * kMiB;
   memory_ = MemoryPlan::for_budget(budget);
+  if (options_.vertex_memory_mb > 0) memory_.source_vertices = options_.vertex_memory_mb * kMiB;
+  // The temporary directory comes first: file readers that resolve faces out
+  // of core keep their spill files in it (each in a directory of its own,
+  // removed with its source before the store is renamed into place).
+  std::error_code ec;
+  const fs::path output_path = fs::absolute(options_.output, ec);
+  fs::create_directories(output_path.parent_path(), ec);
+  OUTCORE_RETURN_IF_ERROR(temp_.create_beside(output_path.string()));
+  OUTCORE_RETURN_IF_ERROR(open_sources({memory_.source_vertices, temp_.path()}));
   const bool generated = collect_ranged_generators();
   if (generated) {
     make_chunks();
-    // Groups are filtered from regenerated chunks, never spilled.
+    // Groups are filtered from regenerated chunks, never spilled; no file inputs.
     memory_.spill_buffers = 0;
     memory_.read_chunk = 0;
+    memory_.source_vertices = 0;
   }
   OUTCORE_RETURN_IF_ERROR(generated ? scan_chunks() : scan());
 
@@ -997,10 +994,6 @@ Expected<PackSummary> ScenePacker::run() {
                             " triangles");
   }
 
-  std::error_code ec;
-  const fs::path output_path = fs::absolute(options_.output, ec);
-  fs::create_directories(output_path.parent_path(), ec);
-  OUTCORE_RETURN_IF_ERROR(temp_.create_beside(output_path.string()));
   OUTCORE_RETURN_IF_ERROR(brick_file_.create(temp_.path() + "/" + kBrickDataFileName, memory_.brick_buffer,
                                              /*asynchronous=*/true));
   staging_.resize(memory_.staging);
@@ -1015,6 +1008,9 @@ Expected<PackSummary> ScenePacker::run() {
         pack_stream({input_stream(), all_cheap}, scan_.triangles, scan_.centroid_bounds, 0));
   }
   group_buffer_ = {};
+  // Readers' spill files go now, so that they never end up in the store.
+  sources_.clear();
+  generators_.clear();
   brick_progress_->finish();
   const auto finish_start = std::chrono::steady_clock::now();
   OUTCORE_RETURN_IF_ERROR(brick_file_.close(options_.sync));

@@ -30,6 +30,10 @@ struct PackOptions {
   uint32_t brick_triangles = 32768;
   // Peak memory bound for the packer's own data, in MiB (>= 32).
   uint64_t memory_mb = 1024;
+  // Part of memory_mb that OBJ/PLY readers may use for vertex positions, in
+  // MiB; 0: an eighth. A file with more vertices resolves its faces out of
+  // core (core/io/vertex_spill.h). At most half of memory_mb.
+  uint64_t vertex_memory_mb = 0;
   // Replace an existing store at `output` (after the new one is complete).
   bool overwrite = false;
   // fsync the store before the rename (durable against power loss).
