@@ -31,17 +31,11 @@ import json
 import os
 import shutil
 import statistics
-import subprocess
 import sys
 
+from trace_bench import run  # runs a command, exits with its stderr on failure
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def run(cmd):
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit(f"failed: {' '.join(cmd)}\n{r.stderr}")
-    return r.stdout
 
 
 def read_trace(path):

@@ -193,13 +193,7 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
-  cmd->add_option("--subtree-dir", args->subtree_dir,
-                  "Save built bricks to this directory and load them from it on later misses instead of "
-                  "building (--brick-accel bvh only; docs/CACHE_TUNING.md)");
-  cmd->add_option("--subtree-dir-mb", args->subtree_dir_mb,
-                  "Most MiB of brick files kept in --subtree-dir, least recently used deleted first (0: "
-                  "unbounded)")
-      ->capture_default_str();
+  add_subtree_options(*cmd, args->subtree_dir, args->subtree_dir_mb);
   cmd->add_flag("--no-proxies", args->no_proxies, "Do not skip bricks by their occupancy proxies");
   cmd->add_option("--proxy-res", args->proxy_res,
                   "Proxy voxels along each brick's longest side (default 32)");

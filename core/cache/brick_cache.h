@@ -24,7 +24,8 @@
 //   the tier by the thread that built it (outside the lock, while it holds the
 //   pin). A loaded brick is accounted exactly as a built one (the serialiser
 //   guarantees the same memory_bytes()); the reservation covers the load's
-//   peak too (the file is mapped, not read into the heap).
+//   heap peak too (the file is mapped, not read into the heap; its pages are
+//   file-backed and reclaimable, and unmapped as soon as the brick is read).
 // - Counters: hits + misses counts successful acquisitions; failed ones are in
 //   neither. builds, bytes_built and build_seconds count successful builds;
 //   misses served by the tier are in subtree.loads instead (so, once idle,

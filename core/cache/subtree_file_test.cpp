@@ -9,8 +9,6 @@
 
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -23,19 +21,6 @@ namespace outcore {
 namespace {
 
 namespace fs = std::filesystem;
-
-std::string read_all(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return std::move(s).str();
-}
-
-void write_all(const std::string& path, const std::string& bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  ASSERT_TRUE(out.good()) << path;
-}
 
 // Rewrites the trailing checksum so that only the edited field is wrong.
 std::string with_fixed_checksum(std::string bytes) {
@@ -56,11 +41,11 @@ class SubtreeFileTest : public ::testing::Test {
     const Status written = write_subtree_file(path_, key_, serializer_, *accel_, &bytes);
     ASSERT_TRUE(written.ok()) << written.to_string();
     EXPECT_EQ(bytes, fs::file_size(path_));
-    bytes_ = read_all(path_);
+    bytes_ = testing::read_file_bytes(path_);
   }
 
   SubtreeReadResult read_edited(const std::string& bytes, const SubtreeKey& key) {
-    write_all(dir_.file("edited.subtree"), bytes);
+    testing::write_text_file(dir_.file("edited.subtree"), bytes);
     return read_subtree_file(dir_.file("edited.subtree"), key, serializer_);
   }
   SubtreeReadResult read_edited(const std::string& bytes) { return read_edited(bytes, key_); }

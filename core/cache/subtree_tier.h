@@ -12,7 +12,8 @@
 // - Atomic: a file is written under a temporary name in the directory and
 //   renamed into place, so readers (of this or another process) see a whole
 //   file or none. Not fsync'ed: after a crash a file may be torn, which its
-//   checksum catches.
+//   checksum catches. A writer that crashes mid-file leaves its hidden
+//   temporary (".brick-*.tmp-PID-N"), which is never read; delete it by hand.
 // - Keyed by brick id, the source brick's checksum and the structure key, all
 //   in the file name and checked again in the header: several stores and
 //   configurations may share one directory.

@@ -15,7 +15,6 @@
 #include <atomic>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <random>
 #include <string>
 #include <thread>
@@ -26,7 +25,6 @@
 #include "core/cache/cache_simulator.h"
 #include "core/cache/eviction_policy.h"
 #include "core/query/query_engine.h"
-#include "core/store/scene_packer.h"
 #include "core/store/scene_store.h"
 #include "tests/support/packed_scene.h"
 #include "tests/support/test_paths.h"
@@ -71,23 +69,16 @@ bool bitwise_equal(const std::vector<Hit>& a, const std::vector<Hit>& b) {
 class SubtreeTierTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new testing::TempDir();
-    PackOptions options;
-    options.inputs = {"gen:sphere?level=5"};
-    options.output = dir_->file("scene");
-    options.brick_triangles = 512;
-    options.sync = false;
-    const auto summary = pack_scene(options);
-    ASSERT_TRUE(summary.ok()) << summary.status().to_string();
-    auto store = SceneStore::open(options.output);
+    scene_ = testing::pack_test_scene({"gen:sphere?level=5"}, 512).release();
+    auto store = SceneStore::open(scene_->path);
     ASSERT_TRUE(store.ok()) << store.status().to_string();
     store_ = new std::shared_ptr<const SceneStore>(std::move(store).value());
   }
   static void TearDownTestSuite() {
     delete store_;
-    delete dir_;
+    delete scene_;
     store_ = nullptr;
-    dir_ = nullptr;
+    scene_ = nullptr;
   }
   void SetUp() override {
     ASSERT_NE(store_, nullptr);
@@ -131,11 +122,11 @@ class SubtreeTierTest : public ::testing::Test {
     return {brick, record.checksum, record.triangle_count, cache.builder().serializer()->structure_key()};
   }
 
-  static testing::TempDir* dir_;
+  static testing::PackedScene* scene_;
   static std::shared_ptr<const SceneStore>* store_;
 };
 
-testing::TempDir* SubtreeTierTest::dir_ = nullptr;
+testing::PackedScene* SubtreeTierTest::scene_ = nullptr;
 std::shared_ptr<const SceneStore>* SubtreeTierTest::store_ = nullptr;
 
 TEST_F(SubtreeTierTest, BuiltBricksAreSavedAndALaterCacheLoadsThemWithTheSameBytes) {
@@ -188,14 +179,8 @@ TEST_F(SubtreeTierTest, BadFilesFallBackToARebuildWithTheRightCounter) {
   testing::TempDir tier;
   auto cache = make_cache(kUnlimited, tier.path());
   const std::vector<uint64_t> built = acquire_all(*cache);
-  const auto read = [](const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), {});
-  };
-  const auto write = [](const std::string& path, const std::string& bytes) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  };
+  const auto read = testing::read_file_bytes;
+  const auto write = testing::write_text_file;
   const SubtreeTier& t = *cache->subtree_tier();
   // 0: a flipped byte; 1: truncated; 2: another format version; 3: the file of
   // another brick (wrong source checksum and id); 4: built with other options.
@@ -398,6 +383,30 @@ TEST_F(SubtreeTierTest, AccessTraceRecordsLoadsAndTheReplayMissesWhereTheLiveCac
 
 // ---- through the engine ---------------------------------------------------------
 
+// The answers under an unlimited budget without a tier, and the largest
+// reservation of any brick (budgets are multiples of it).
+struct UnlimitedRun {
+  std::vector<Hit> hits;
+  std::vector<uint8_t> occluded;
+  uint64_t largest_reservation = 0;
+};
+
+UnlimitedRun run_unlimited(const std::string& store, const EngineOptions& options,
+                           const std::vector<Ray>& rays) {
+  UnlimitedRun run;
+  auto engine = QueryEngine::open(store, options);
+  EXPECT_TRUE(engine.ok()) << engine.status().to_string();
+  if (!engine.ok()) return run;
+  run.hits.resize(rays.size());
+  run.occluded.resize(rays.size());
+  EXPECT_TRUE((*engine)->intersect(rays, run.hits, {}).ok());
+  EXPECT_TRUE((*engine)->occluded(rays, run.occluded, {}).ok());
+  for (const BrickRecord& b : (*engine)->store().manifest().bricks)
+    run.largest_reservation =
+        std::max(run.largest_reservation, (*engine)->cache().builder().reserve_bytes(b.triangle_count));
+  return run;
+}
+
 TEST(SubtreeTierEngine, TinyBudgetWithTheTierAnswersLikeAnUnlimitedBudget) {
   const auto scene = testing::pack_test_scene(
       {testing::model_path("stanford-bunny.obj"), "gen:torus?nu=48&nv=24&cx=0.3", "gen:sphere?level=4"},
@@ -407,15 +416,11 @@ TEST(SubtreeTierEngine, TinyBudgetWithTheTierAnswersLikeAnUnlimitedBudget) {
     EngineOptions options;
     options.brick_accel = "bvh";
     options.accel_options = {{"triangle_test", test}};
-    auto unlimited = QueryEngine::open(scene->path, options);
-    ASSERT_TRUE(unlimited.ok()) << unlimited.status().to_string();
-    std::vector<Hit> want(rays.size());
-    std::vector<uint8_t> want_occluded(rays.size());
-    ASSERT_TRUE((*unlimited)->intersect(rays, want, {}).ok());
-    ASSERT_TRUE((*unlimited)->occluded(rays, want_occluded, {}).ok());
-    uint64_t most = 0;
-    for (const BrickRecord& b : (*unlimited)->store().manifest().bricks)
-      most = std::max(most, (*unlimited)->cache().builder().reserve_bytes(b.triangle_count));
+    const UnlimitedRun unlimited = run_unlimited(scene->path, options, rays);
+    ASSERT_FALSE(unlimited.hits.empty());
+    const std::vector<Hit>& want = unlimited.hits;
+    const std::vector<uint8_t>& want_occluded = unlimited.occluded;
+    const uint64_t most = unlimited.largest_reservation;
 
     testing::TempDir tier;
     options.cache_bytes = 2 * most;
@@ -452,13 +457,10 @@ TEST(SubtreeTierEngine, ConcurrentBatchesWithTheTierAnswerLikeOneUnlimitedBatch)
   const auto rays = testing::make_test_rays(scene->bounds, 2000, 5);
   EngineOptions options;
   options.brick_accel = "bvh";
-  auto unlimited = QueryEngine::open(scene->path, options);
-  ASSERT_TRUE(unlimited.ok());
-  std::vector<Hit> want(rays.size());
-  ASSERT_TRUE((*unlimited)->intersect(rays, want, {}).ok());
-  uint64_t most = 0;
-  for (const BrickRecord& b : (*unlimited)->store().manifest().bricks)
-    most = std::max(most, (*unlimited)->cache().builder().reserve_bytes(b.triangle_count));
+  const UnlimitedRun unlimited = run_unlimited(scene->path, options, rays);
+  ASSERT_FALSE(unlimited.hits.empty());
+  const std::vector<Hit>& want = unlimited.hits;
+  const uint64_t most = unlimited.largest_reservation;
   testing::TempDir tier;
   options.cache_bytes = 3 * most;
   options.subtree_dir = tier.path();

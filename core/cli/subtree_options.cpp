@@ -1,8 +1,21 @@
 #include "core/cli/subtree_options.h"
 
+#include <CLI/CLI.hpp>
+
 #include <limits>
 
 namespace outcore {
+
+void add_subtree_options(CLI::App& command, std::string& subtree_dir, uint64_t& subtree_dir_mb) {
+  command.add_option("--subtree-dir", subtree_dir,
+                     "Save built bricks to this directory and load them from it on later misses instead of "
+                     "building (--brick-accel bvh only; docs/CACHE_TUNING.md)");
+  command
+      .add_option("--subtree-dir-mb", subtree_dir_mb,
+                  "Most MiB of brick files kept in --subtree-dir, least recently used deleted first (0: "
+                  "unbounded)")
+      ->capture_default_str();
+}
 
 Status apply_subtree_options(const std::string& subtree_dir, uint64_t subtree_dir_mb,
                              EngineOptions& options) {

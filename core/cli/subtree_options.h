@@ -11,7 +11,14 @@
 #include "core/query/query_engine.h"
 #include "core/util/status.h"
 
+namespace CLI {
+class App;
+}
+
 namespace outcore {
+
+// Adds --subtree-dir and --subtree-dir-mb to `command`, storing into the two.
+void add_subtree_options(CLI::App& command, std::string& subtree_dir, uint64_t& subtree_dir_mb);
 
 // Sets options.subtree_dir / subtree_max_bytes. INVALID_ARGUMENT naming the
 // option when --subtree-dir is given for a brick structure other than bvh

@@ -50,8 +50,8 @@ Expected<MappedFile> MappedFile::open(const std::string& path) {
       file.size_ = 0;
       return io_error("cannot map " + path + ": " + std::strerror(error));
     }
-    // Read once, front to back.
-    madvise(data, file.size_, MADV_SEQUENTIAL | MADV_WILLNEED);
+    // Read once, front to back: ask for all of it now (a hint; failure is harmless).
+    (void)madvise(data, file.size_, MADV_WILLNEED);
     file.data_ = static_cast<const char*>(data);
   }
   ::close(fd);  // the mapping keeps the file

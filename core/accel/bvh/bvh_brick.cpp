@@ -68,7 +68,7 @@ std::string_view triangle_test_name(TriangleTest test) {
 }
 
 std::optional<TriangleTest> triangle_test_from_name(std::string_view name) {
-  for (const TriangleTest test : {TriangleTest::kMt, TriangleTest::kWatertight, TriangleTest::kDouble}) {
+  for (const TriangleTest test : kAllTriangleTests) {
     if (name == triangle_test_name(test)) return test;
   }
   return std::nullopt;

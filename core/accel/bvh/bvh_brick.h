@@ -37,6 +37,8 @@
 namespace outcore {
 
 enum class TriangleTest { kMt, kWatertight, kDouble };
+inline constexpr TriangleTest kAllTriangleTests[] = {TriangleTest::kMt, TriangleTest::kWatertight,
+                                                     TriangleTest::kDouble};
 
 std::string_view triangle_test_name(TriangleTest test);
 std::optional<TriangleTest> triangle_test_from_name(std::string_view name);

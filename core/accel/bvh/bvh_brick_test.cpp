@@ -20,7 +20,7 @@ using accel_test::all_ids;
 using accel_test::bounds_of;
 using accel_test::load_brick_from;
 
-constexpr TriangleTest kAllTests[] = {TriangleTest::kMt, TriangleTest::kWatertight, TriangleTest::kDouble};
+constexpr auto& kAllTests = kAllTriangleTests;
 
 #ifdef OUTCORE_SANITIZE_BUILD
 constexpr std::size_t kRays = 600;
