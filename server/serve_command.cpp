@@ -18,6 +18,7 @@
 #include <string>
 
 #include "core/cli/commands.h"
+#include "core/cli/subtree_options.h"
 #include "core/query/query_engine.h"
 #include "server/scene_query_service.h"
 
@@ -36,6 +37,8 @@ struct ServeArgs {
   uint64_t cache_mb = 1024;
   std::string policy = "lru";
   std::string brick_accel = "embree";
+  std::string subtree_dir;
+  uint64_t subtree_dir_mb = 0;  // 0: unbounded
   bool no_proxies = false;
   std::optional<int64_t> proxy_res;  // unset: the default resolution
   int threads = 0;
@@ -54,6 +57,11 @@ void log_summary(const server::SceneQueryService& service, const QueryEngine& en
       c.requests, c.failed_requests, c.rays, c.rays_hit, c.invalid_rays, c.seconds_tracing, cache.hits,
       cache.misses, cache.builds, cache.evictions, cache.resident_bricks, cache.resident_bytes,
       cache.peak_resident_bytes, engine.cache().budget_bytes());
+  if (engine.cache().subtree_tier() != nullptr) {
+    const SubtreeTierCounters& t = cache.subtree;
+    spdlog::info("subtree tier: {} loads ({:.3f} s), {} writes, {} rejected, {} files / {} bytes on disk",
+                 t.loads, t.load_seconds, t.writes, t.rejected(), t.files, t.bytes);
+  }
 }
 
 int run_serve(const ServeArgs& args) {
@@ -109,6 +117,8 @@ int run_serve(const ServeArgs& args) {
   engine_options.cache_bytes = args.cache_mb << 20;
   engine_options.eviction_policy = args.policy;
   engine_options.brick_accel = args.brick_accel;
+  const Status subtree = apply_subtree_options(args.subtree_dir, args.subtree_dir_mb, engine_options);
+  if (!subtree.ok()) return report_command_error("serve", subtree.message());
   auto engine = QueryEngine::open(args.scene, engine_options);
   if (!engine.ok()) return report_command_error("serve", engine.status().message());
   spdlog::info("brick structure: {} ({}){}", engine_options.brick_accel,
@@ -191,6 +201,7 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
+  add_subtree_options(*cmd, args->subtree_dir, args->subtree_dir_mb);
   cmd->add_flag("--no-proxies", args->no_proxies, "Do not skip bricks by their occupancy proxies");
   cmd->add_option("--proxy-res", args->proxy_res,
                   "Proxy voxels along each brick's longest side (default 32)");

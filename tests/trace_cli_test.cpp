@@ -1,8 +1,9 @@
 // End-to-end tests of `outcore trace`, run as the real binary: the hits file
 // is bitwise the in-process QueryEngine answer whatever the reordering, cache
 // budget, thread count, repeats or brick proxies (--no-proxies, --proxy-res); --any-hit writes bools;
-// statistics are printed and written as JSON; bad rays files, invalid rays (with --strict), unknown options,
-// a missing store and a cache too small for one brick are errors that name what is wrong.
+// statistics are printed and written as JSON; --subtree-dir saves bvh bricks
+// and a later run loads them (same answer, no builds); bad rays files, invalid rays (with --strict), unknown
+// options, a missing store and a cache too small for one brick are errors that name what is wrong.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -671,6 +672,56 @@ TEST_F(TraceCli, BadProxyOptionsAreRejectedByName) {
   expect_trace_fails(trace(rays_path_, h, {"--proxy-res", "100000"}), h, {"--proxy-res", "100000"});
   expect_trace_fails(trace(rays_path_, h, {"--proxy-res", "many"}), h, {"--proxy-res"});
   expect_trace_fails(trace(rays_path_, h, {"--no-proxies", "--proxy-res", "8"}), h, {"--no-proxies"});
+}
+
+// ---- subtree tier -------------------------------------------------------------------
+
+TEST_F(TraceCli, SubtreeDirGivesTheSameAnswerAndALaterRunLoadsInsteadOfBuilding) {
+  TempDir out;
+  const std::string tier = out.file("subtrees");
+  const SubprocessResult plain = trace(rays_path_, out.file("plain.npy"), {"--brick-accel", "bvh"});
+  ASSERT_TRUE(plain.succeeded()) << plain.describe();
+  const std::string want = hits_data(out.file("plain.npy"));
+  ASSERT_EQ(want.size(), kRayCount * sizeof(Hit));
+  for (int run = 0; run < 2; ++run) {
+    const std::string json = out.file("stats" + std::to_string(run) + ".json");
+    const std::string hits = out.file("hits" + std::to_string(run) + ".npy");
+    const SubprocessResult r = trace(rays_path_, hits,
+                                     {"--brick-accel", "bvh", "--cache-mb", "1", "--subtree-dir", tier,
+                                      "--subtree-dir-mb", "64", "--stats", "--stats-json", json});
+    ASSERT_TRUE(r.succeeded()) << r.describe();
+    EXPECT_TRUE(hits_data(hits) == want) << "run " << run << " answered differently with the tier";
+    EXPECT_TRUE(contains(r.stdout_text, "subtree tier:")) << r.stdout_text;
+    const std::string stats = read_bytes(json);
+    ASSERT_TRUE(valid_json(stats)) << stats;
+    EXPECT_EQ(json_uint(stats, "subtree_rejects"), 0u);
+    if (run == 0) {
+      EXPECT_GT(json_uint(stats, "subtree_writes"), 0u);
+      EXPECT_EQ(json_uint(stats, "subtree_writes"), json_uint(stats, "brick_builds"));
+    } else {
+      EXPECT_EQ(json_uint(stats, "brick_builds"), 0u) << stats;
+      EXPECT_EQ(json_uint(stats, "subtree_loads"), json_uint(stats, "cache_misses")) << stats;
+      EXPECT_GT(json_uint(stats, "subtree_bytes_read"), 0u);
+    }
+  }
+  std::size_t files = 0;
+  for (const auto& entry : fs::directory_iterator(tier)) files += entry.path().extension() == ".subtree";
+  EXPECT_GT(files, 0u);
+  EXPECT_LE(files, brick_count_);
+}
+
+TEST_F(TraceCli, SubtreeDirIsRejectedWithoutBvhNamingTheOption) {
+  TempDir out;
+  const std::string h = out.file("h.npy");
+  const std::string tier = out.file("subtrees");
+  expect_trace_fails(trace(rays_path_, h, {"--subtree-dir", tier}), h, {"--subtree-dir", "bvh", "embree"});
+  expect_trace_fails(trace(rays_path_, h, {"--reference", "--subtree-dir", tier}), h, {"--subtree-dir"});
+  expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "bvh", "--subtree-dir-mb", "8"}), h,
+                     {"--subtree-dir-mb needs --subtree-dir"});
+  EXPECT_FALSE(fs::exists(tier)) << "nothing created on a rejected command line";
+  const SubprocessResult serve = outcore({"serve", store_, "--listen", "127.0.0.1:0", "--subtree-dir", tier});
+  EXPECT_FALSE(serve.succeeded());
+  EXPECT_TRUE(contains(serve.stderr_text, "--subtree-dir needs --brick-accel bvh")) << serve.describe();
 }
 
 }  // namespace

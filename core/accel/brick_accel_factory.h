@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/accel/brick_accel.h"
+#include "core/accel/brick_serializer.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
 
@@ -27,6 +28,9 @@ class BrickBuilder {
   // build; the cache reserves it before building so it never overruns its budget.
   virtual uint64_t reserve_bytes(uint32_t triangle_count) const = 0;
   virtual const std::string& name() const = 0;
+  // How to save and reload this builder's accels (the subtree tier), or
+  // nullptr when the structure cannot be serialised (embree, reference).
+  virtual const BrickSerializer* serializer() const { return nullptr; }
 };
 
 using BrickAccelOptions = std::map<std::string, std::string>;

@@ -34,6 +34,7 @@ const char* access_outcome_name(AccessOutcome outcome) {
     case AccessOutcome::kHit: return "hit";
     case AccessOutcome::kMiss: return "miss";
     case AccessOutcome::kWait: return "wait";
+    case AccessOutcome::kLoad: return "load";
   }
   return "?";
 }
@@ -151,10 +152,12 @@ Expected<AccessTrace> read_access_trace(const std::string& path) {
           return invalid_argument(where() + "not an outcore access trace (the first line must be '# " +
                                   std::string(kPrefix) + std::to_string(kAccessTraceVersion) + "')");
         int version = 0;
-        if (!parse_unsigned(body.substr(kPrefix.size()), version) || version != kAccessTraceVersion)
+        if (!parse_unsigned(body.substr(kPrefix.size()), version) || version < kOldestAccessTraceVersion ||
+            version > kAccessTraceVersion)
           return failed_precondition(
               where() + "access trace version '" + std::string(body.substr(kPrefix.size())) +
-              "' is not supported (this build reads version " + std::to_string(kAccessTraceVersion) + ")");
+              "' is not supported (this build reads versions " + std::to_string(kOldestAccessTraceVersion) +
+              " to " + std::to_string(kAccessTraceVersion) + ")");
         saw_version = true;
         continue;
       }
@@ -232,8 +235,11 @@ Expected<AccessTrace> read_access_trace(const std::string& path) {
       r.outcome = AccessOutcome::kMiss;
     else if (fields[5] == "wait")
       r.outcome = AccessOutcome::kWait;
+    else if (fields[5] == "load")
+      r.outcome = AccessOutcome::kLoad;
     else
-      return invalid_argument(where() + "outcome '" + std::string(fields[5]) + "' is not hit, miss or wait");
+      return invalid_argument(where() + "outcome '" + std::string(fields[5]) +
+                              "' is not hit, miss, wait or load");
     if (trace.info.bricks != 0 && r.brick >= trace.info.bricks)
       return invalid_argument(where() + "brick " + std::to_string(r.brick) + " is beyond the trace's " +
                               std::to_string(trace.info.bricks) + " bricks");

@@ -2,9 +2,9 @@
 // BrickCache, in the order the cache served them, for offline replay
 // (cache_simulator.h, `outcore cache-sim`).
 //
-// File format (CSV, version 1), chosen to be read by people and by pandas:
+// File format (CSV, version 2), chosen to be read by people and by pandas:
 //
-//   # outcore brick access trace, version 1
+//   # outcore brick access trace, version 2
 //   # policy: lru
 //   # budget_bytes: 67108864
 //   # builder: embree
@@ -19,10 +19,13 @@
 // file order. bytes: the brick's accounted bytes (after the build on a miss,
 // the resident size on a hit). reserved_bytes: the builder's upper bound the
 // cache reserves before building it (BrickBuilder::reserve_bytes).
-// build_seconds: measured load + build time on a miss, 0 otherwise, written
-// with 17 significant digits so a replay feeds GDSF the very same cost.
-// outcome: miss (this request built the brick), hit (it was ready), wait (it
-// was being built by another thread and this request waited for that build).
+// build_seconds: measured load + build time on a miss (the subtree file's
+// load time on a load), 0 otherwise, written with 17 significant digits so a
+// replay feeds GDSF the very same cost. outcome: miss (this request built the
+// brick), load (this request loaded it from the subtree tier instead of
+// building it; subtree_tier.h), hit (it was ready), wait (it was being built
+// by another thread and this request waited for that build). Version 2 added
+// "load"; version 1 files (which have none) are read too.
 // Failed acquisitions are not recorded. A line "# hint: 12 7 40" (brick ids,
 // soonest first; possibly none) before a record is the schedule hint the
 // engine gave the policy before that request (schedule-aware policies use
@@ -44,7 +47,7 @@
 
 namespace outcore {
 
-enum class AccessOutcome : uint8_t { kHit, kMiss, kWait };
+enum class AccessOutcome : uint8_t { kHit, kMiss, kWait, kLoad };
 const char* access_outcome_name(AccessOutcome outcome);
 
 struct AccessRecord {
@@ -75,7 +78,8 @@ struct AccessTrace {
   std::vector<AccessRecord> records;
 };
 
-inline constexpr int kAccessTraceVersion = 1;
+inline constexpr int kAccessTraceVersion = 2;
+inline constexpr int kOldestAccessTraceVersion = 1;  // still read
 
 class AccessTraceWriter {
  public:

@@ -21,13 +21,21 @@ std::string describe_bytes(uint64_t bytes) {
   return std::string(mib) + " (" + std::to_string(bytes) + " bytes)";
 }
 
-// Loads brick `id` (checksum verified) and builds it. Every failure, including
-// an exception from the builder, comes back as a Status naming the brick, so
-// the caller can always undo its reservation.
+// Loads brick `key.brick_id` from the tier when there is one and it holds
+// the brick (*loaded = true), else from the store (checksum verified) and
+// builds it. Every failure, including an exception from the builder, comes
+// back as a Status naming the brick, so the caller can always undo its
+// reservation.
 Expected<std::unique_ptr<BrickAccel>> load_and_build(const SceneStore& store, const BrickBuilder& builder,
-                                                     uint32_t id) {
+                                                     SubtreeTier* tier, const SubtreeKey& key, bool& loaded) {
+  const uint32_t id = key.brick_id;
   const std::string brick = "brick " + std::to_string(id);
   try {
+    if (tier != nullptr) {
+      std::unique_ptr<BrickAccel> accel = tier->load(key);
+      loaded = accel != nullptr;
+      if (loaded) return accel;
+    }
     BrickData data;
     OUTCORE_RETURN_IF_ERROR(store.load_brick(id, data));  // names the brick
     Expected<std::unique_ptr<BrickAccel>> built = builder.build(std::move(data));
@@ -142,9 +150,11 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   account(static_cast<int64_t>(reservation));
   lock.unlock();
 
-  // Load and build outside the lock.
+  // Load from the tier, or load and build, outside the lock.
   const auto start = std::chrono::steady_clock::now();
-  Expected<std::unique_ptr<BrickAccel>> built = load_and_build(*store_, *builder_, brick_id);
+  const SubtreeKey key = subtree_key(brick_id);
+  bool loaded = false;
+  Expected<std::unique_ptr<BrickAccel>> built = load_and_build(*store_, *builder_, tier_.get(), key, loaded);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   if (!built.ok()) {
@@ -176,12 +186,15 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   entry.accel = std::move(accel);
   entry.state = State::kReady;
   entry.pins = 1;
+  // A loaded brick's cost is its load: what missing it again costs now.
   policy_->on_insert(brick_id, bytes, seconds);
-  ++counters_.builds;
   ++counters_.misses;
   ++counters_.resident_bricks;
-  counters_.bytes_built += bytes;
-  counters_.build_seconds += seconds;
+  if (!loaded) {
+    ++counters_.builds;
+    counters_.bytes_built += bytes;
+    counters_.build_seconds += seconds;
+  }
   PinnedBrick pin;
   pin.cache_ = this;
   pin.accel_ = entry.accel.get();
@@ -189,10 +202,22 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   pin.was_hit_ = false;
   const uint64_t resident = counters_.resident_bytes;
   std::vector<AccessRecord> chunk;
-  if (trace_) chunk = record_access(brick_id, bytes, reservation, seconds, AccessOutcome::kMiss);
+  if (trace_) {
+    chunk = record_access(brick_id, bytes, reservation, seconds,
+                          loaded ? AccessOutcome::kLoad : AccessOutcome::kMiss);
+  }
   lock.unlock();
   changed_.notify_all();
   hand_over(std::move(chunk));
+  // Saved while pinned (it cannot be evicted meanwhile), after waiters have
+  // been let in: the write delays only this acquirer.
+  if (tier_ && !loaded) {
+    try {
+      tier_->store(key, *pin.accel_);
+    } catch (const std::exception& e) {
+      spdlog::warn("subtree tier: saving brick {} threw: {}", brick_id, e.what());
+    }
+  }
 
   if (overran) {
     spdlog::warn(
@@ -201,6 +226,24 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
         builder_->name(), brick_id, triangles, bytes, reservation, resident, budget_bytes_);
   }
   return pin;
+}
+
+Status BrickCache::enable_subtree_tier(const SubtreeTierOptions& options) {
+  const BrickSerializer* serializer = builder_->serializer();
+  if (serializer == nullptr) {
+    return failed_precondition("brick structure '" + builder_->name() +
+                               "' cannot be kept in a subtree tier (it cannot be serialised; bvh can)");
+  }
+  OUTCORE_ASSIGN_OR_RETURN(tier_, SubtreeTier::open(options, *serializer));
+  return Status::Ok();
+}
+
+SubtreeKey BrickCache::subtree_key(uint32_t brick_id) const {
+  SubtreeKey key;
+  key.brick_id = brick_id;
+  if (!tier_) return key;
+  const BrickRecord& record = store_->manifest().bricks[brick_id];
+  return SubtreeKey{brick_id, record.checksum, record.triangle_count, tier_->serializer().structure_key()};
 }
 
 bool BrickCache::make_room(uint64_t bytes, std::unique_lock<std::mutex>& lock) {
@@ -349,8 +392,13 @@ bool BrickCache::is_resident(uint32_t brick_id) const {
 }
 
 CacheCounters BrickCache::counters() const {
-  std::lock_guard lock(mutex_);
-  return counters_;
+  CacheCounters counters;
+  {
+    std::lock_guard lock(mutex_);
+    counters = counters_;
+  }
+  if (tier_) counters.subtree = tier_->counters();
+  return counters;
 }
 
 }  // namespace outcore

@@ -18,12 +18,22 @@
 //   themselves, so each gets its own outcome (a corrupted brick fails for every
 //   one of them; a transient error may succeed on retry). A brick id beyond the
 //   store is OUT_OF_RANGE (as in SceneStore::load_brick).
+// - Subtree tier (optional, enable_subtree_tier; subtree_tier.h): on a miss
+//   the brick is loaded from the tier's directory when it holds a valid file,
+//   else loaded from the store and built, and the built brick is then saved to
+//   the tier by the thread that built it (outside the lock, while it holds the
+//   pin). A loaded brick is accounted exactly as a built one (the serialiser
+//   guarantees the same memory_bytes()); the reservation covers the load's
+//   heap peak too (the file is mapped, not read into the heap; its pages are
+//   file-backed and reclaimable, and unmapped as soon as the brick is read).
 // - Counters: hits + misses counts successful acquisitions; failed ones are in
-//   neither. builds, bytes_built and build_seconds count successful builds.
+//   neither. builds, bytes_built and build_seconds count successful builds;
+//   misses served by the tier are in subtree.loads instead (so, once idle,
+//   misses = builds + subtree.loads + acquisitions that waited).
 // - Access trace (optional, set_access_trace): every successful acquisition is
-//   recorded (access_trace.h) into a buffer under the lock and handed to the
-//   writer in chunks outside it; the destructor and flush_access_trace() hand
-//   over the rest.
+//   recorded (access_trace.h; a miss served by the tier as a "load") into a
+//   buffer under the lock and handed to the writer in chunks outside it; the
+//   destructor and flush_access_trace() hand over the rest.
 //
 // Thread-safety: all member functions may be called from any thread. One mutex
 // guards the table; it is taken per brick acquisition, never per ray, and is
@@ -40,6 +50,7 @@
 #include "core/accel/brick_accel_factory.h"
 #include "core/cache/access_trace.h"
 #include "core/cache/eviction_policy.h"
+#include "core/cache/subtree_tier.h"
 #include "core/store/scene_store.h"
 
 namespace outcore {
@@ -57,6 +68,9 @@ struct CacheCounters {
   // Builds whose true bytes exceeded BrickBuilder::reserve_bytes (a builder
   // bug; each is logged). Only these can push accounted bytes past the budget.
   uint64_t reservation_overruns = 0;
+  // The subtree tier's own counters (all zero without a tier): loads, writes,
+  // rejections by reason, bytes and seconds.
+  SubtreeTierCounters subtree;
 };
 
 class BrickCache;
@@ -99,6 +113,13 @@ class BrickCache {
   uint64_t budget_bytes() const { return budget_bytes_; }
   const BrickBuilder& builder() const { return *builder_; }
   const EvictionPolicy& policy() const { return *policy_; }
+
+  // Keeps built bricks in a subtree tier (see above). Call before the first
+  // acquire. FAILED_PRECONDITION when the builder's structure cannot be
+  // serialised (BrickBuilder::serializer() is null); the tier's open errors.
+  Status enable_subtree_tier(const SubtreeTierOptions& options);
+  // nullptr without a tier.
+  const SubtreeTier* subtree_tier() const { return tier_.get(); }
 
   // Records every later acquisition into `trace` (nullptr stops recording).
   // Set it before the first acquire so the trace starts from an empty cache.
@@ -144,11 +165,13 @@ class BrickCache {
                                           AccessOutcome outcome);
   void hand_over(std::vector<AccessRecord> chunk);
   Status too_large(uint32_t brick_id, uint64_t reservation) const;
+  SubtreeKey subtree_key(uint32_t brick_id) const;
 
   std::shared_ptr<const SceneStore> store_;
   std::unique_ptr<BrickBuilder> builder_;
   std::unique_ptr<EvictionPolicy> policy_;
   const uint64_t budget_bytes_;
+  std::unique_ptr<SubtreeTier> tier_;  // set before the first acquire, then fixed
 
   mutable std::mutex mutex_;
   std::condition_variable changed_;

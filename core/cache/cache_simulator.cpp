@@ -24,7 +24,7 @@ TraceProfile TraceProfile::of(const AccessTrace& trace) {
   std::vector<uint64_t> largest(bricks, 0);
   std::vector<uint8_t> seen(bricks, 0);
   for (const AccessRecord& r : trace.records) {
-    if (r.outcome == AccessOutcome::kMiss) {
+    if (is_measured_miss(r)) {
       seconds[r.brick] += r.build_seconds;
       ++builds[r.brick];
     }

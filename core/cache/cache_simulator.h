@@ -10,11 +10,12 @@
 // - a brick whose reservation exceeds the budget is RESOURCE_EXHAUSTED naming
 //   it (BrickCache refuses it the same way).
 // - a record's schedule hint (if any) goes to policy.on_schedule_hint first.
-// Bytes come from the record being replayed. The cost of a simulated build is
-// the record's own build_seconds when the live cache built there too, else
-// the mean of that brick's measured builds in the trace (0 if it has none).
-// So replaying a trace with the policy and budget it was recorded with gives
-// exactly the live cache's misses, builds and bytes (tested), as long as the
+// Bytes come from the record being replayed. The cost of a simulated miss is
+// the record's own build_seconds when the live cache missed there too (built,
+// or loaded from the subtree tier: its load seconds), else the mean of that
+// brick's measured misses in the trace (0 if it has none). So replaying a
+// trace with the policy and budget it was recorded with gives exactly the live
+// cache's misses (builds + subtree loads) and bytes (tested), as long as the
 // live run acquired one brick at a time (the engine's reordered batches do;
 // concurrent batches add pins and waits the replay does not model: a "wait"
 // record is replayed as an ordinary request).
@@ -38,7 +39,7 @@ struct SimulationResult {
   uint64_t budget_bytes = 0;
   uint64_t requests = 0;
   uint64_t hits = 0;
-  uint64_t misses = 0;  // = builds
+  uint64_t misses = 0;  // = builds (live: builds + subtree tier loads)
   uint64_t evictions = 0;
   uint64_t bytes_built = 0;
   double build_seconds = 0;
@@ -51,7 +52,7 @@ struct SimulationResult {
 
 // What a replay needs per brick, computed once per trace.
 struct TraceProfile {
-  std::vector<double> mean_build_seconds;  // per brick id
+  std::vector<double> mean_build_seconds;  // per brick id, over its miss and load records
   uint64_t working_set_bytes = 0;          // sum over distinct bricks of their largest bytes
   uint64_t largest_reservation = 0;        // the smallest budget every request fits in
   uint32_t largest_brick_id = 0;           // whose reservation that is
@@ -60,9 +61,14 @@ struct TraceProfile {
   static TraceProfile of(const AccessTrace& trace);
   // The reservation of record r (reserved_bytes, or bytes when 0).
   static uint64_t reservation(const AccessRecord& r) { return r.reserved_bytes ? r.reserved_bytes : r.bytes; }
+  // Whether the live cache made the brick resident at record r (a build or a
+  // subtree tier load), so its build_seconds were measured there.
+  static bool is_measured_miss(const AccessRecord& r) {
+    return r.outcome == AccessOutcome::kMiss || r.outcome == AccessOutcome::kLoad;
+  }
   // The cost a simulated build of record r is charged (see above).
   double cost(const AccessRecord& r) const {
-    return r.outcome == AccessOutcome::kMiss ? r.build_seconds : mean_build_seconds[r.brick];
+    return is_measured_miss(r) ? r.build_seconds : mean_build_seconds[r.brick];
   }
 };
 

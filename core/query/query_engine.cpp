@@ -186,6 +186,8 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   auto cache =
       std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
   if (options.access_trace) cache->set_access_trace(options.access_trace);
+  if (!options.subtree_dir.empty())
+    OUTCORE_RETURN_IF_ERROR(cache->enable_subtree_tier({options.subtree_dir, options.subtree_max_bytes}));
   auto engine = std::unique_ptr<QueryEngine>(new QueryEngine(
       std::move(store), std::move(cache), std::move(proxies), std::move(proxy_report), cache_fits_scene));
   engine->accel_options_ = std::move(accel_options);
@@ -892,6 +894,15 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const CacheCounters counters_after = cache_->counters();
   stats.brick_builds = counters_after.builds - counters_before.builds;
   stats.evictions = counters_after.evictions - counters_before.evictions;
+  const SubtreeTierCounters& tier_before = counters_before.subtree;
+  const SubtreeTierCounters& tier_after = counters_after.subtree;
+  stats.subtree_loads = tier_after.loads - tier_before.loads;
+  stats.subtree_writes = tier_after.writes - tier_before.writes;
+  stats.subtree_rejects = tier_after.rejected() - tier_before.rejected();
+  stats.subtree_bytes_read = tier_after.bytes_read - tier_before.bytes_read;
+  stats.subtree_bytes_written = tier_after.bytes_written - tier_before.bytes_written;
+  stats.seconds_brick_builds = counters_after.build_seconds - counters_before.build_seconds;
+  stats.seconds_subtree_loads = tier_after.load_seconds - tier_before.load_seconds;
   stats.peak_bytes_resident = counters_after.peak_resident_bytes;
   stats.cache_budget_bytes = cache_->budget_bytes();
   stats.seconds_total = seconds_since(start);
@@ -916,10 +927,15 @@ std::string QueryStats::to_json() const {
       .field("cache_hits", cache_hits)
       .field("cache_misses", cache_misses);
   j.field("brick_builds", brick_builds).field("evictions", evictions);
+  j.field("subtree_loads", subtree_loads).field("subtree_writes", subtree_writes);
+  j.field("subtree_rejects", subtree_rejects).field("subtree_bytes_read", subtree_bytes_read);
+  j.field("subtree_bytes_written", subtree_bytes_written);
   j.field("peak_bytes_resident", peak_bytes_resident).field("cache_budget_bytes", cache_budget_bytes);
   j.key("seconds").begin_object();
   j.field("total", seconds_total).field("upper", seconds_upper).field("build", seconds_build);
-  j.field("brick", seconds_brick).field("proxy", seconds_proxy).end_object();
+  j.field("brick", seconds_brick).field("proxy", seconds_proxy);
+  j.field("brick_builds_summed", seconds_brick_builds).field("subtree_loads_summed", seconds_subtree_loads);
+  j.end_object();
   j.field("rays_per_second", seconds_total > 0 ? rays / seconds_total : 0.0);
   j.end_object();
   return j.str();
@@ -957,6 +973,16 @@ std::string QueryStats::to_text() const {
     text += buf;
   } else {
     text += "  proxies: off\n";
+  }
+  if (subtree_loads + subtree_writes + subtree_rejects > 0) {
+    std::snprintf(buf, sizeof buf,
+                  "  subtree tier: %llu loads (%.1f MiB, %.3f s), %llu writes (%.1f MiB), %llu rejected; "
+                  "builds %.3f s\n",
+                  static_cast<unsigned long long>(subtree_loads), subtree_bytes_read / 1048576.0,
+                  seconds_subtree_loads, static_cast<unsigned long long>(subtree_writes),
+                  subtree_bytes_written / 1048576.0, static_cast<unsigned long long>(subtree_rejects),
+                  seconds_brick_builds);
+    text += buf;
   }
   return text;
 }

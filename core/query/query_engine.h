@@ -58,6 +58,12 @@ struct EngineOptions {
   // store's proxies.bin, or built on open and cached there).
   bool proxies = true;
   ProxyBuildConfig proxy_config;
+  // When set, built bricks are saved to this directory and later misses load
+  // them from it instead of building (core/cache/subtree_tier.h); only for
+  // brick structures that can be serialised (bvh). subtree_max_bytes bounds
+  // the files kept there (0: unbounded).
+  std::string subtree_dir;
+  uint64_t subtree_max_bytes = 0;
 };
 
 struct QueryOptions {
@@ -87,6 +93,14 @@ struct QueryStats {
   uint64_t cache_misses = 0;
   uint64_t brick_builds = 0;  // cache-wide during this query (others' batches included)
   uint64_t evictions = 0;     // likewise
+  // The subtree tier, likewise cache-wide (all 0 without one): misses served
+  // by loading a file instead of building, files written, their bytes, and
+  // files refused (corrupt, other version, stale; each then built).
+  uint64_t subtree_loads = 0;
+  uint64_t subtree_writes = 0;
+  uint64_t subtree_rejects = 0;
+  uint64_t subtree_bytes_read = 0;
+  uint64_t subtree_bytes_written = 0;
   uint64_t peak_bytes_resident = 0;
   uint64_t cache_budget_bytes = 0;
   double seconds_total = 0;
@@ -94,6 +108,10 @@ struct QueryStats {
   double seconds_build = 0;  // waiting for bricks: load + build (or another batch's build)
   double seconds_brick = 0;  // tracing inside bricks, plus finding each ray's next brick
   double seconds_proxy = 0;  // proxy tests, summed over threads (part of upper and brick)
+  // Cache-wide, summed over threads: store load + build of the bricks built,
+  // and subtree file load + deserialise of the bricks loaded instead.
+  double seconds_brick_builds = 0;
+  double seconds_subtree_loads = 0;
 
   std::string to_json() const;
   std::string to_text() const;

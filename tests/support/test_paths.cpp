@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 
 namespace outcore::testing {
 
@@ -25,6 +26,11 @@ void write_text_file(const std::string& path, const std::string& text) {
   ASSERT_TRUE(out.good()) << path;
   out << text;
   ASSERT_TRUE(out.good()) << path;
+}
+
+std::string read_file_bytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
 }
 
 }  // namespace outcore::testing

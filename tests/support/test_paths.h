@@ -34,5 +34,7 @@ inline bool contains(const std::string& text, const std::string& part) {
 
 // Writes text to a file (test fixtures), aborting the test on failure.
 void write_text_file(const std::string& path, const std::string& text);
+// A whole file's bytes (empty when it cannot be read).
+std::string read_file_bytes(const std::string& path);
 
 }  // namespace outcore::testing

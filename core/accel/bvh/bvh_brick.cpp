@@ -4,6 +4,7 @@
 #include <chrono>
 #include <utility>
 
+#include "core/accel/bvh/bvh_brick_serializer.h"
 #include "core/accel/bvh/bvh_traversal.h"
 #include "core/accel/bvh/double_triangle_test.h"
 #include "core/accel/bvh/mt_triangle_test.h"
@@ -67,7 +68,7 @@ std::string_view triangle_test_name(TriangleTest test) {
 }
 
 std::optional<TriangleTest> triangle_test_from_name(std::string_view name) {
-  for (const TriangleTest test : {TriangleTest::kMt, TriangleTest::kWatertight, TriangleTest::kDouble}) {
+  for (const TriangleTest test : kAllTriangleTests) {
     if (name == triangle_test_name(test)) return test;
   }
   return std::nullopt;
@@ -119,12 +120,13 @@ Expected<std::unique_ptr<BvhBrickAccel>> BvhBrickAccel::build(BrickData&& brick,
   return accel;
 }
 
-std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id) {
+std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id,
+                                                        uint32_t triangle_count) {
   std::unique_ptr<BvhBrickAccel> accel(new BvhBrickAccel());
   accel->tree_ = std::move(tree);
   accel->test_ = test;
   accel->brick_id_ = brick_id;
-  accel->triangle_count_ = static_cast<uint32_t>(accel->tree_.triangles.size());
+  accel->triangle_count_ = triangle_count;
   accel->build_peak_bytes_ = accel->memory_bytes();
   return accel;
 }
@@ -161,6 +163,15 @@ void BvhBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays,
       return occluded_all<WatertightTriangleTest>(tree_, ray_ids, rays, occluded);
     case TriangleTest::kDouble: return occluded_all<DoubleTriangleTest>(tree_, ray_ids, rays, occluded);
   }
+}
+
+BvhBrickBuilder::BvhBrickBuilder(const BvhBrickConfig& config)
+    : config_(config), serializer_(std::make_unique<BvhBrickSerializer>(config)) {}
+
+BvhBrickBuilder::~BvhBrickBuilder() = default;
+
+const BrickSerializer* BvhBrickBuilder::serializer() const {
+  return serializer_.get();
 }
 
 Expected<std::unique_ptr<BrickAccel>> BvhBrickBuilder::build(BrickData&& brick) const {

@@ -37,6 +37,8 @@
 namespace outcore {
 
 enum class TriangleTest { kMt, kWatertight, kDouble };
+inline constexpr TriangleTest kAllTriangleTests[] = {TriangleTest::kMt, TriangleTest::kWatertight,
+                                                     TriangleTest::kDouble};
 
 std::string_view triangle_test_name(TriangleTest test);
 std::optional<TriangleTest> triangle_test_from_name(std::string_view name);
@@ -58,7 +60,10 @@ class BvhBrickAccel final : public BrickAccel {
   // count or the config is invalid, OUT_OF_RANGE beyond kMaxTriangles.
   static Expected<std::unique_ptr<BvhBrickAccel>> build(BrickData&& brick, const BvhBrickConfig& config);
   // A brick from a tree (e.g. deserialize_bvh()); the tree must be valid.
-  static std::unique_ptr<BvhBrickAccel> from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id);
+  // triangle_count: the source brick's, degenerate triangles included (the
+  // tree holds only the usable ones).
+  static std::unique_ptr<BvhBrickAccel> from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id,
+                                                  uint32_t triangle_count);
   // Upper bound on memory_bytes() and build_peak_bytes() for n triangles.
   static uint64_t reserve_bytes(uint64_t triangle_count);
 
@@ -86,19 +91,24 @@ class BvhBrickAccel final : public BrickAccel {
   double build_seconds_ = 0;
 };
 
+class BvhBrickSerializer;
+
 class BvhBrickBuilder final : public BrickBuilder {
  public:
-  explicit BvhBrickBuilder(const BvhBrickConfig& config) : config_(config) {}
+  explicit BvhBrickBuilder(const BvhBrickConfig& config);
+  ~BvhBrickBuilder() override;
 
   Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override;
   uint64_t reserve_bytes(uint32_t triangle_count) const override {
     return BvhBrickAccel::reserve_bytes(triangle_count);
   }
   const std::string& name() const override;
+  const BrickSerializer* serializer() const override;
   const BvhBrickConfig& config() const { return config_; }
 
  private:
   BvhBrickConfig config_;
+  std::unique_ptr<const BvhBrickSerializer> serializer_;  // bvh_brick_serializer.h
 };
 
 }  // namespace outcore

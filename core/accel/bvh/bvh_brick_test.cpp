@@ -20,7 +20,7 @@ using accel_test::all_ids;
 using accel_test::bounds_of;
 using accel_test::load_brick_from;
 
-constexpr TriangleTest kAllTests[] = {TriangleTest::kMt, TriangleTest::kWatertight, TriangleTest::kDouble};
+constexpr auto& kAllTests = kAllTriangleTests;
 
 #ifdef OUTCORE_SANITIZE_BUILD
 constexpr std::size_t kRays = 600;
@@ -258,7 +258,7 @@ TEST(BvhBrick, SerialisationRoundTripGivesIdenticalAnswers) {
     auto tree = deserialize_bvh(bytes);
     ASSERT_TRUE(tree.ok()) << tree.status().to_string();
     EXPECT_EQ(tree->nodes.size(), accel->tree().nodes.size());
-    const auto loaded = BvhBrickAccel::from_tree(std::move(tree).value(), test, 0);
+    const auto loaded = BvhBrickAccel::from_tree(std::move(tree).value(), test, 0, accel->triangle_count());
     std::vector<Hit> a(rays.size()), b(rays.size());
     accel->intersect(all_ids(rays.size()), rays.data(), a.data());
     loaded->intersect(all_ids(rays.size()), rays.data(), b.data());

@@ -1,0 +1,174 @@
+// BvhBrickSerializer: a saved and reloaded bvh brick answers bitwise as the
+// built one (every triangle test, models and generator scenes, degenerate
+// triangles), reports the same memory and triangle count, and a malformed
+// payload is an error, never a crash. Structure keys differ exactly when the
+// config does.
+#include "core/accel/bvh/bvh_brick_serializer.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstddef>
+#include <cstring>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "core/accel/accel_test_util.h"
+
+namespace outcore {
+namespace {
+
+using accel_test::all_ids;
+using accel_test::load_brick_from;
+
+// Enough rays to hit every part of these small bricks; few enough for ASan.
+constexpr std::size_t kRays = 1500;
+
+BvhBrickConfig config_of(TriangleTest test) {
+  BvhBrickConfig config;
+  config.triangle_test = test;
+  return config;
+}
+
+std::unique_ptr<BvhBrickAccel> build(BrickData brick, const BvhBrickConfig& config) {
+  auto accel = BvhBrickAccel::build(std::move(brick), config);
+  EXPECT_TRUE(accel.ok()) << accel.status().to_string();
+  return std::move(accel).value();
+}
+
+std::string save(const BvhBrickSerializer& serializer, const BrickAccel& accel) {
+  std::ostringstream out;
+  const Status saved = serializer.save(accel, out);
+  EXPECT_TRUE(saved.ok()) << saved.to_string();
+  return std::move(out).str();
+}
+
+std::vector<Ray> rays_for(const BrickData& brick, uint64_t seed) {
+  const Aabb b = accel_test::bounds_of(brick);
+  auto rays = accel_test::rays_from_outside(b, kRays / 2, seed);
+  const auto inside = accel_test::rays_from_inside(b, kRays - kRays / 2, seed + 1);
+  rays.insert(rays.end(), inside.begin(), inside.end());
+  for (std::size_t i = 0; i < rays.size(); i += 5) rays[i].tfar = 0.3f * length(b.extent());
+  return rays;
+}
+
+void expect_same_answers(const BrickAccel& built, const BrickAccel& loaded, const std::vector<Ray>& rays,
+                         const std::string& what) {
+  std::vector<Hit> a(rays.size()), b(rays.size());
+  built.intersect(all_ids(rays.size()), rays.data(), a.data());
+  loaded.intersect(all_ids(rays.size()), rays.data(), b.data());
+  std::size_t hits = 0;
+  for (const Hit& h : a) hits += h.is_hit();
+  EXPECT_GT(hits, rays.size() / 100) << what << ": the rays should hit something";
+  EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(Hit)), 0) << what;
+  std::vector<uint8_t> oa(rays.size(), 0), ob(rays.size(), 0);
+  built.occluded(all_ids(rays.size()), rays.data(), oa.data());
+  loaded.occluded(all_ids(rays.size()), rays.data(), ob.data());
+  EXPECT_EQ(oa, ob) << what;
+}
+
+TEST(BvhBrickSerializer, RoundTripAnswersBitwiseAndKeepsTheBytes) {
+  const std::vector<std::pair<std::string, BrickData>> bricks = [] {
+    std::vector<std::pair<std::string, BrickData>> out;
+    out.emplace_back("bunny", load_brick_from(accel_test::bunny_path()));
+    out.emplace_back("torus", load_brick_from("gen:torus?nu=48&nv=24"));
+    out.emplace_back("sphere", load_brick_from("gen:sphere?level=4"));
+    out.emplace_back("degenerate-heavy", accel_test::degenerate_heavy(3000, 7));
+    return out;
+  }();
+  for (const auto& [name, brick] : bricks) {
+    for (const TriangleTest test : kAllTriangleTests) {
+      const std::string what = name + " " + std::string(triangle_test_name(test));
+      const BvhBrickSerializer serializer(config_of(test));
+      BrickData copy = brick;
+      copy.brick_id = 17;
+      const auto built = build(std::move(copy), config_of(test));
+      const std::string payload = save(serializer, *built);
+      auto loaded = serializer.load(payload, 17, built->triangle_count());
+      ASSERT_TRUE(loaded.ok()) << what << ": " << loaded.status().to_string();
+      const auto& bvh = dynamic_cast<const BvhBrickAccel&>(**loaded);
+      EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes()) << what;
+      EXPECT_EQ((*loaded)->triangle_count(), built->triangle_count()) << what;
+      EXPECT_EQ(bvh.brick_id(), 17u) << what;
+      EXPECT_EQ(bvh.triangle_test(), test) << what;
+      EXPECT_EQ(bvh.tree().nodes.size(), built->tree().nodes.size()) << what;
+      expect_same_answers(*built, **loaded, rays_for(brick, 99), what);
+    }
+  }
+}
+
+TEST(BvhBrickSerializer, EmptyBrickRoundTrips) {
+  const BvhBrickSerializer serializer(config_of(TriangleTest::kWatertight));
+  const auto built = build(BrickData{}, config_of(TriangleTest::kWatertight));
+  auto loaded = serializer.load(save(serializer, *built), 0, 0);
+  ASSERT_TRUE(loaded.ok()) << loaded.status().to_string();
+  EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes());
+}
+
+TEST(BvhBrickSerializer, MalformedPayloadsAreErrorsNotCrashes) {
+  const BrickData brick = load_brick_from("gen:sphere?level=2");
+  const BvhBrickSerializer serializer(config_of(TriangleTest::kWatertight));
+  const auto built = build(brick, config_of(TriangleTest::kWatertight));
+  const std::string payload = save(serializer, *built);
+  const uint32_t n = built->triangle_count();
+  for (const std::size_t cut :
+       {std::size_t{0}, std::size_t{1}, std::size_t{9}, payload.size() / 2, payload.size() - 1}) {
+    EXPECT_FALSE(serializer.load(std::string_view(payload).substr(0, cut), 0, n).ok()) << "cut at " << cut;
+  }
+  EXPECT_FALSE(serializer.load(payload + "x", 0, n).ok()) << "trailing bytes";
+  EXPECT_FALSE(serializer.load(payload, 0, n - 1).ok()) << "more triangles than the brick has";
+  // A payload saved with another triangle test.
+  const BvhBrickSerializer mt(config_of(TriangleTest::kMt));
+  const std::string mt_payload = save(mt, *build(brick, config_of(TriangleTest::kMt)));
+  auto wrong = serializer.load(mt_payload, 0, n);
+  ASSERT_FALSE(wrong.ok());
+  EXPECT_NE(wrong.status().message().find("triangle test"), std::string::npos) << wrong.status().message();
+  // Saving a brick of another config is refused.
+  std::ostringstream out;
+  EXPECT_FALSE(serializer.save(*build(brick, config_of(TriangleTest::kMt)), out).ok());
+  // A structurally broken tree behind a well-formed archive.
+  std::string broken = payload;
+  const std::size_t root_index = 1 + 8 + offsetof(BvhNode, index);  // test byte, node count, then nodes[0]
+  const uint32_t self = 0;
+  std::memcpy(broken.data() + root_index, &self, sizeof(self));
+  EXPECT_FALSE(serializer.load(broken, 0, n).ok());
+}
+
+TEST(BvhBrickSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {
+  std::set<std::string> keys;
+  for (const TriangleTest test : kAllTriangleTests)
+    keys.insert(BvhBrickSerializer(config_of(test)).structure_key());
+  BvhBrickConfig c = config_of(TriangleTest::kWatertight);
+  c.builder.bin_count = 32;
+  keys.insert(BvhBrickSerializer(c).structure_key());
+  c = config_of(TriangleTest::kWatertight);
+  c.builder.max_leaf_size = 4;
+  keys.insert(BvhBrickSerializer(c).structure_key());
+  c = config_of(TriangleTest::kWatertight);
+  c.builder.traversal_cost = std::nextafter(1.0f, 2.0f);  // the smallest change still differs
+  keys.insert(BvhBrickSerializer(c).structure_key());
+  c = config_of(TriangleTest::kWatertight);
+  c.builder.intersection_cost = 2.0f;
+  keys.insert(BvhBrickSerializer(c).structure_key());
+  EXPECT_EQ(keys.size(), 7u);
+  EXPECT_EQ(BvhBrickSerializer(config_of(TriangleTest::kMt)).structure_key(),
+            BvhBrickSerializer(config_of(TriangleTest::kMt)).structure_key());
+  EXPECT_EQ(BvhBrickSerializer(BvhBrickConfig{}).structure_key().rfind("bvh/", 0), 0u);
+}
+
+TEST(BvhBrickSerializer, BuilderHasOneAndOtherStructuresNone) {
+  auto bvh = make_brick_builder("bvh", {{"triangle_test", "mt"}});
+  ASSERT_TRUE(bvh.ok());
+  ASSERT_NE((*bvh)->serializer(), nullptr);
+  EXPECT_NE((*bvh)->serializer()->structure_key().find("triangle_test=mt"), std::string::npos);
+  for (const char* name : {"embree", "reference"}) {
+    auto other = make_brick_builder(name, {});
+    ASSERT_TRUE(other.ok()) << name;
+    EXPECT_EQ((*other)->serializer(), nullptr) << name;
+  }
+}
+
+}  // namespace
+}  // namespace outcore

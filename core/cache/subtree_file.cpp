@@ -1,0 +1,129 @@
+#include "core/cache/subtree_file.h"
+
+#include <cereal/archives/binary.hpp>
+#include <cereal/types/string.hpp>
+
+#include <cstring>
+#include <istream>
+#include <new>
+#include <ostream>
+
+#include "core/util/checksum.h"
+#include "core/util/checksumming_file_streambuf.h"
+#include "core/util/mapped_file.h"
+#include "core/util/span_streambuf.h"
+
+namespace outcore {
+namespace {
+
+constexpr std::size_t kPreambleBytes = sizeof(kSubtreeMagic) + sizeof(uint32_t);
+constexpr std::size_t kTrailerBytes = sizeof(uint64_t);
+
+SubtreeReadResult rejected(SubtreeRejection why, const std::string& path, const std::string& message) {
+  SubtreeReadResult result;
+  result.rejection = why;
+  result.message = path + ": " + message;
+  return result;
+}
+
+std::string describe(const SubtreeKey& key) {
+  return "brick " + std::to_string(key.brick_id) + ", source checksum " +
+         std::to_string(key.source_checksum) + ", " + std::to_string(key.triangle_count) + " triangles, '" +
+         key.structure_key + "'";
+}
+
+}  // namespace
+
+const char* subtree_rejection_name(SubtreeRejection rejection) {
+  switch (rejection) {
+    case SubtreeRejection::kNone: return "none";
+    case SubtreeRejection::kAbsent: return "absent";
+    case SubtreeRejection::kCorrupt: return "corrupt";
+    case SubtreeRejection::kVersion: return "version";
+    case SubtreeRejection::kStale: return "stale";
+  }
+  return "?";
+}
+
+Status write_subtree_file(const std::string& path, const SubtreeKey& key, const BrickSerializer& serializer,
+                          const BrickAccel& accel, uint64_t* file_bytes) {
+  ChecksummingFileStreambuf file;
+  OUTCORE_RETURN_IF_ERROR(file.create(path));
+  std::ostream out(&file);
+  out.write(kSubtreeMagic, sizeof(kSubtreeMagic));
+  const uint32_t version = kSubtreeFormatVersion;
+  out.write(reinterpret_cast<const char*>(&version), sizeof(version));
+  try {
+    cereal::BinaryOutputArchive archive(out);
+    archive(key);
+  } catch (const std::exception& e) {
+    return io_error("writing " + path + ": " + e.what());
+  }
+  Status saved = serializer.save(accel, out);
+  if (saved.ok() && !out) saved = io_error("writing " + path + " failed");
+  if (!saved.ok()) {
+    (void)file.close();
+    return saved.with_context("writing " + path);
+  }
+  const uint64_t checksum = file.checksum();
+  OUTCORE_RETURN_IF_ERROR(file.append_unchecked(&checksum, sizeof(checksum)));
+  if (file_bytes != nullptr) *file_bytes = file.size();
+  return file.close();
+}
+
+SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
+                                    const BrickSerializer& serializer) {
+  Expected<MappedFile> mapped = MappedFile::open(path);
+  if (!mapped.ok()) {
+    if (mapped.status().code() == StatusCode::kNotFound) return SubtreeReadResult{};
+    return rejected(SubtreeRejection::kCorrupt, path, mapped.status().message());
+  }
+  const std::span<const char> bytes = mapped->bytes();
+  if (bytes.size() < kPreambleBytes + kTrailerBytes) {
+    return rejected(SubtreeRejection::kCorrupt, path,
+                    "truncated (" + std::to_string(bytes.size()) + " bytes, no header)");
+  }
+  if (std::memcmp(bytes.data(), kSubtreeMagic, sizeof(kSubtreeMagic)) != 0) {
+    return rejected(SubtreeRejection::kCorrupt, path, "not a subtree file (wrong magic)");
+  }
+  uint32_t version = 0;
+  std::memcpy(&version, bytes.data() + sizeof(kSubtreeMagic), sizeof(version));
+  if (version != kSubtreeFormatVersion) {
+    return rejected(SubtreeRejection::kVersion, path,
+                    "format version " + std::to_string(version) + ", this build reads version " +
+                        std::to_string(kSubtreeFormatVersion));
+  }
+  const std::size_t checked = bytes.size() - kTrailerBytes;
+  uint64_t stored = 0;
+  std::memcpy(&stored, bytes.data() + checked, sizeof(stored));
+  if (checksum64(bytes.data(), checked) != stored) {
+    return rejected(SubtreeRejection::kCorrupt, path, "checksum mismatch (truncated or altered)");
+  }
+  const std::span<const char> body = bytes.subspan(kPreambleBytes, checked - kPreambleBytes);
+  SubtreeKey found;
+  SpanStreambuf buffer(body);
+  try {
+    std::istream in(&buffer);
+    cereal::BinaryInputArchive archive(in);
+    archive(found);
+  } catch (const std::exception& e) {
+    return rejected(SubtreeRejection::kCorrupt, path, std::string("unreadable header: ") + e.what());
+  }
+  if (!(found == key)) {
+    return rejected(SubtreeRejection::kStale, path, "holds " + describe(found) + "; wanted " + describe(key));
+  }
+  SubtreeReadResult result;
+  result.file_bytes = bytes.size();
+  try {
+    Expected<std::unique_ptr<BrickAccel>> loaded =
+        serializer.load(body.subspan(body.size() - buffer.remaining()), key.brick_id, key.triangle_count);
+    if (!loaded.ok()) return rejected(SubtreeRejection::kCorrupt, path, loaded.status().message());
+    result.accel = std::move(loaded).value();
+  } catch (const std::bad_alloc&) {
+    return rejected(SubtreeRejection::kCorrupt, path, "out of memory while loading");
+  }
+  result.rejection = SubtreeRejection::kNone;
+  return result;
+}
+
+}  // namespace outcore

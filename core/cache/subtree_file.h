@@ -1,0 +1,79 @@
+// Subtree files: one built brick structure saved by the subtree tier
+// (subtree_tier.h), so a later miss can load it instead of building it again.
+//
+// Layout (version 1; all integers little-endian, as cereal's binary archive
+// writes them on the little-endian hosts the store already requires):
+//
+//   magic            8 bytes "OCSUBTR\x1a"
+//   format_version   uint32 (kSubtreeFormatVersion)
+//   brick_id         uint32   -.
+//   source_checksum  uint64    | cereal binary archive of SubtreeKey: the
+//   triangle_count   uint32    | store brick it was built from (the
+//   structure_key    string   -'  manifest's XXH3-64 of the brick) and how
+//   payload          the BrickSerializer's bytes (to the trailer)
+//   checksum         uint64 XXH3-64 of every byte before it
+//
+// A file is used only when magic, version and checksum are right and its key
+// equals the one asked for: the same brick id, the same source bytes (so a
+// file from another store, or from before a repack, is never used unless the
+// brick is bitwise the same, when the structure is too) and the same
+// structure key (structure, payload version and every option). Anything else
+// is a rejection with a reason; the caller rebuilds.
+//
+// Thread-safety: functions of their arguments; concurrent calls on different
+// paths are independent.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "core/accel/brick_serializer.h"
+#include "core/util/status.h"
+
+namespace outcore {
+
+inline constexpr char kSubtreeMagic[8] = {'O', 'C', 'S', 'U', 'B', 'T', 'R', '\x1a'};
+inline constexpr uint32_t kSubtreeFormatVersion = 1;
+
+struct SubtreeKey {
+  uint32_t brick_id = 0;
+  uint64_t source_checksum = 0;  // BrickRecord::checksum
+  uint32_t triangle_count = 0;
+  std::string structure_key;  // BrickSerializer::structure_key()
+
+  bool operator==(const SubtreeKey&) const = default;
+
+  template <class Archive>
+  void serialize(Archive& ar) {
+    ar(brick_id, source_checksum, triangle_count, structure_key);
+  }
+};
+
+// Why a file was not used.
+enum class SubtreeRejection : uint8_t {
+  kNone,     // it was used
+  kAbsent,   // no such file
+  kCorrupt,  // wrong magic, truncated, checksum mismatch, or a payload the serialiser refuses
+  kVersion,  // another format version
+  kStale,    // a valid file for another key (brick bytes, structure or options)
+};
+const char* subtree_rejection_name(SubtreeRejection rejection);
+
+struct SubtreeReadResult {
+  std::unique_ptr<BrickAccel> accel;  // set when rejection == kNone
+  SubtreeRejection rejection = SubtreeRejection::kAbsent;
+  std::string message;  // why, naming the file, when rejected (not when absent)
+  uint64_t file_bytes = 0;
+};
+
+// Writes `accel` under `key` to a new file at `path` (which must not exist);
+// the caller renames it into place. Sets *file_bytes to the file's size.
+Status write_subtree_file(const std::string& path, const SubtreeKey& key, const BrickSerializer& serializer,
+                          const BrickAccel& accel, uint64_t* file_bytes);
+
+// Reads `path` if it holds `key`; never throws, never trusts the file.
+SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
+                                    const BrickSerializer& serializer);
+
+}  // namespace outcore

@@ -1,0 +1,201 @@
+#include "core/cache/subtree_tier.h"
+
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cinttypes>
+#include <cstdio>
+#include <filesystem>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+#include "core/util/checksum.h"
+
+namespace outcore {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+constexpr std::string_view kPrefix = "brick-";
+constexpr std::string_view kSuffix = ".subtree";
+
+std::string hex64(uint64_t value) {
+  char text[17];
+  std::snprintf(text, sizeof(text), "%016" PRIx64, value);
+  return text;
+}
+
+bool is_subtree_file_name(const std::string& name) {
+  return name.size() > kPrefix.size() + kSuffix.size() && name.starts_with(kPrefix) &&
+         name.ends_with(kSuffix);
+}
+
+double seconds_since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+}  // namespace
+
+SubtreeTier::SubtreeTier(const SubtreeTierOptions& options, const BrickSerializer& serializer)
+    : options_(options),
+      serializer_(serializer),
+      structure_hash_(
+          hex64(checksum64(serializer.structure_key().data(), serializer.structure_key().size()))) {}
+
+Expected<std::unique_ptr<SubtreeTier>> SubtreeTier::open(const SubtreeTierOptions& options,
+                                                         const BrickSerializer& serializer) {
+  if (options.directory.empty()) return invalid_argument("subtree tier: no directory given");
+  std::error_code error;
+  fs::create_directories(options.directory, error);
+  if (error) return io_error("subtree tier: cannot create " + options.directory + ": " + error.message());
+  if (!fs::is_directory(options.directory, error)) {
+    return io_error("subtree tier: " + options.directory + " is not a directory");
+  }
+  std::unique_ptr<SubtreeTier> tier(new SubtreeTier(options, serializer));
+  // Index what is there, least recently modified first.
+  std::vector<std::pair<fs::file_time_type, std::pair<std::string, uint64_t>>> found;
+  for (fs::directory_iterator it(options.directory, error), end; !error && it != end; it.increment(error)) {
+    const std::string name = it->path().filename().string();
+    std::error_code entry_error;
+    if (!is_subtree_file_name(name) || !it->is_regular_file(entry_error)) continue;
+    const uint64_t bytes = it->file_size(entry_error);
+    const fs::file_time_type modified = it->last_write_time(entry_error);
+    if (!entry_error) found.push_back({modified, {name, bytes}});
+  }
+  if (error) return io_error("subtree tier: cannot list " + options.directory + ": " + error.message());
+  std::sort(found.begin(), found.end());
+  std::lock_guard lock(tier->mutex_);
+  for (const auto& [modified, file] : found) {
+    tier->files_[file.first] = {file.second, ++tier->use_clock_};
+    ++tier->counters_.files;
+    tier->counters_.bytes += file.second;
+  }
+  tier->evict_locked(0);
+  return tier;
+}
+
+std::string SubtreeTier::file_name(const SubtreeKey& key) const {
+  return std::string(kPrefix) + std::to_string(key.brick_id) + "-" + hex64(key.source_checksum) + "-" +
+         structure_hash_ + std::string(kSuffix);
+}
+
+std::string SubtreeTier::path_of(const SubtreeKey& key) const {
+  return (fs::path(options_.directory) / file_name(key)).string();
+}
+
+std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
+  const std::string name = file_name(key);
+  const std::string path = path_of(key);
+  const auto start = Clock::now();
+  SubtreeReadResult read = read_subtree_file(path, key, serializer_);
+  const double seconds = seconds_since(start);
+
+  std::lock_guard lock(mutex_);
+  switch (read.rejection) {
+    case SubtreeRejection::kNone: {
+      ++counters_.loads;
+      counters_.bytes_read += read.file_bytes;
+      counters_.load_seconds += seconds;
+      const auto it = files_.find(name);
+      if (it != files_.end()) it->second.last_use = ++use_clock_;
+      return std::move(read.accel);
+    }
+    case SubtreeRejection::kAbsent:
+      ++counters_.absent;
+      forget_locked(name);
+      return nullptr;
+    case SubtreeRejection::kCorrupt: ++counters_.rejected_corrupt; break;
+    case SubtreeRejection::kVersion: ++counters_.rejected_version; break;
+    case SubtreeRejection::kStale: ++counters_.rejected_stale; break;
+  }
+  spdlog::warn("subtree tier: ignoring {} ({}); building brick {} instead", read.message,
+               subtree_rejection_name(read.rejection), key.brick_id);
+  std::error_code ignored;
+  fs::remove(path, ignored);  // the rebuild writes a good one
+  forget_locked(name);
+  return nullptr;
+}
+
+void SubtreeTier::store(const SubtreeKey& key, const BrickAccel& accel) {
+  const std::string name = file_name(key);
+  std::string temp;
+  {
+    std::lock_guard lock(mutex_);
+    if (files_.count(name) != 0) return;
+    // Unique among processes (pid) and threads (sequence); hidden from the
+    // index (no "brick-" prefix).
+    temp = (fs::path(options_.directory) /
+            ("." + name + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(++temp_sequence_)))
+               .string();
+  }
+  const auto start = Clock::now();
+  uint64_t bytes = 0;
+  const Status written = write_subtree_file(temp, key, serializer_, accel, &bytes);
+  std::error_code error;
+  if (!written.ok()) {
+    fs::remove(temp, error);
+    std::lock_guard lock(mutex_);
+    ++counters_.write_failures;
+    if (!std::exchange(logged_write_failure_, true)) {
+      spdlog::warn("subtree tier: cannot save brick {}: {} (further failures are only counted)", key.brick_id,
+                   written.message());
+    }
+    return;
+  }
+  std::lock_guard lock(mutex_);
+  if (options_.max_bytes > 0 && bytes > options_.max_bytes) {
+    fs::remove(temp, error);
+    ++counters_.writes_too_large;
+    return;
+  }
+  evict_locked(bytes);
+  fs::rename(temp, path_of(key), error);
+  if (error) {
+    fs::remove(temp, error);
+    ++counters_.write_failures;
+    if (!std::exchange(logged_write_failure_, true)) {
+      spdlog::warn("subtree tier: cannot rename the file of brick {} into place: {}", key.brick_id,
+                   error.message());
+    }
+    return;
+  }
+  forget_locked(name);  // a file another process wrote meanwhile was replaced
+  files_[name] = {bytes, ++use_clock_};
+  ++counters_.files;
+  counters_.bytes += bytes;
+  ++counters_.writes;
+  counters_.bytes_written += bytes;
+  counters_.write_seconds += seconds_since(start);
+}
+
+void SubtreeTier::evict_locked(uint64_t incoming) {
+  if (options_.max_bytes == 0) return;
+  while (!files_.empty() && counters_.bytes + incoming > options_.max_bytes) {
+    const auto victim = std::min_element(files_.begin(), files_.end(), [](const auto& a, const auto& b) {
+      return a.second.last_use < b.second.last_use;
+    });
+    std::error_code ignored;
+    fs::remove(fs::path(options_.directory) / victim->first, ignored);
+    ++counters_.files_evicted;
+    forget_locked(victim->first);
+  }
+}
+
+void SubtreeTier::forget_locked(const std::string& name) {
+  const auto it = files_.find(name);
+  if (it == files_.end()) return;
+  --counters_.files;
+  counters_.bytes -= it->second.bytes;
+  files_.erase(it);
+}
+
+SubtreeTierCounters SubtreeTier::counters() const {
+  std::lock_guard lock(mutex_);
+  return counters_;
+}
+
+}  // namespace outcore

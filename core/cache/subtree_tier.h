@@ -1,0 +1,118 @@
+// SubtreeTier: a directory of built brick structures (subtree files,
+// subtree_file.h) between the brick cache and the scene store. When the cache
+// builds a brick it saves the result here; on a later miss (after an
+// eviction, or in a later process) it loads the file instead of building
+// again. Only for brick structures with a BrickSerializer ("bvh").
+//
+// - Written on build, not on eviction: the building thread already holds the
+//   brick pinned and is off the cache's lock, the file is there for the next
+//   process too, and evicting (which happens while another thread waits for
+//   room) stays as cheap as before. Each brick is written once per directory
+//   (a brick the tier knows is on disk is not written again).
+// - Atomic: a file is written under a temporary name in the directory and
+//   renamed into place, so readers (of this or another process) see a whole
+//   file or none. Not fsync'ed: after a crash a file may be torn, which its
+//   checksum catches. A writer that crashes mid-file leaves its hidden
+//   temporary (".brick-*.tmp-PID-N"), which is never read; delete it by hand.
+// - Keyed by brick id, the source brick's checksum and the structure key, all
+//   in the file name and checked again in the header: several stores and
+//   configurations may share one directory.
+// - Bounded (max_bytes > 0): the files this tier knows (found at open, plus
+//   those it writes) are kept within max_bytes by deleting the least recently
+//   used (loaded or written; at open, oldest modification first). A file
+//   larger than the whole bound is not written. 0 means unbounded. Processes
+//   sharing a directory each keep their own view (files another process
+//   writes later are used but not counted).
+// - A file that is corrupt, truncated, of another version or stale (another
+//   key under the expected name) is counted by reason, logged, deleted, and
+//   the caller builds instead: never a wrong answer.
+//
+// Thread-safety: all member functions may be called from any thread; one
+// mutex guards the index and is held for renames and deletions, never while
+// reading, checking or writing a file.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "core/accel/brick_serializer.h"
+#include "core/cache/subtree_file.h"
+#include "core/util/status.h"
+
+namespace outcore {
+
+struct SubtreeTierOptions {
+  std::string directory;   // created if missing
+  uint64_t max_bytes = 0;  // 0: unbounded
+};
+
+struct SubtreeTierCounters {
+  uint64_t loads = 0;   // lookups served by a valid file
+  uint64_t absent = 0;  // lookups that found no file
+  uint64_t rejected_corrupt = 0;
+  uint64_t rejected_version = 0;
+  uint64_t rejected_stale = 0;
+  uint64_t writes = 0;
+  uint64_t write_failures = 0;    // I/O errors (the first one is logged)
+  uint64_t writes_too_large = 0;  // files larger than the whole bound, not kept
+  uint64_t files_evicted = 0;
+  uint64_t bytes_read = 0;  // of the files loaded
+  uint64_t bytes_written = 0;
+  double load_seconds = 0;   // map + check + deserialise, summed over loads
+  double write_seconds = 0;  // serialise + write + rename, summed over writes
+  uint64_t files = 0;        // in the directory now, as far as this tier knows
+  uint64_t bytes = 0;        // their size
+
+  uint64_t rejected() const { return rejected_corrupt + rejected_version + rejected_stale; }
+};
+
+class SubtreeTier {
+ public:
+  // Creates the directory if needed and indexes the subtree files in it.
+  // IO_ERROR when it cannot be created or listed.
+  static Expected<std::unique_ptr<SubtreeTier>> open(const SubtreeTierOptions& options,
+                                                     const BrickSerializer& serializer);
+  SubtreeTier(const SubtreeTier&) = delete;
+  SubtreeTier& operator=(const SubtreeTier&) = delete;
+
+  // The structure saved under `key`, or nullptr when there is no valid one.
+  std::unique_ptr<BrickAccel> load(const SubtreeKey& key);
+  // Saves `accel` under `key` unless a file for it is known to exist.
+  // Failures are counted and logged, never returned: the tier is a cache.
+  void store(const SubtreeKey& key, const BrickAccel& accel);
+
+  // Where the file for `key` lives (tests, tools).
+  std::string path_of(const SubtreeKey& key) const;
+  SubtreeTierCounters counters() const;
+  const SubtreeTierOptions& options() const { return options_; }
+  const BrickSerializer& serializer() const { return serializer_; }
+
+ private:
+  struct FileEntry {
+    uint64_t bytes = 0;
+    uint64_t last_use = 0;
+  };
+
+  SubtreeTier(const SubtreeTierOptions& options, const BrickSerializer& serializer);
+  std::string file_name(const SubtreeKey& key) const;
+  // Under the lock: deletes least recently used files until `incoming` more
+  // bytes fit in the bound.
+  void evict_locked(uint64_t incoming);
+  void forget_locked(const std::string& name);
+
+  const SubtreeTierOptions options_;
+  const BrickSerializer& serializer_;
+  const std::string structure_hash_;  // of the structure key, for file names
+
+  mutable std::mutex mutex_;
+  std::map<std::string, FileEntry> files_;  // by file name
+  uint64_t use_clock_ = 0;
+  uint64_t temp_sequence_ = 0;
+  bool logged_write_failure_ = false;
+  SubtreeTierCounters counters_;
+};
+
+}  // namespace outcore
