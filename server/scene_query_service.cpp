@@ -72,6 +72,8 @@ ServiceOptions resolve(const ServiceOptions& options, const QueryEngine& engine)
   if (resolved.max_group_rays == 0) {
     resolved.max_group_rays = std::max<uint64_t>(1, kGroupRaysPerBrick * engine.store().brick_count());
   }
+  if (resolved.gather_wait_ms < 0)
+    resolved.gather_wait_ms = engine.cache_fits_scene() ? 0 : kGatherWaitOutOfCore;
   return resolved;
 }
 
@@ -79,7 +81,8 @@ ServiceOptions resolve(const ServiceOptions& options, const QueryEngine& engine)
 
 SceneQueryService::SceneQueryService(QueryEngine& engine, const ServiceOptions& options)
     : engine_(engine), options_(resolve(options, engine)) {
-  spdlog::debug("streams: chunks traced together up to {} rays", options_.max_group_rays);
+  spdlog::debug("streams: chunks traced together up to {} rays, gathered while at most {} ms apart",
+                options_.max_group_rays, options_.gather_wait_ms);
 }
 
 template <QueryKind kKind>
@@ -253,7 +256,8 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
                                              grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream) {
   using Traits = KindTraits<kKind>;
   const auto stream_start = Clock::now();
-  StreamPipeline<Response> pipeline(stream, options_.max_group_rays);
+  StreamPipeline<Response> pipeline(stream, options_.max_group_rays,
+                                    std::chrono::milliseconds(options_.gather_wait_ms));
   // The tracer's first error; read once the tracer has been joined.
   grpc::Status tracer_status = grpc::Status::OK;
   pipeline.start([&] {

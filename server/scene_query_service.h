@@ -40,7 +40,16 @@ struct ServiceOptions {
   // server's --stream-group-rays; see stream_pipeline.h). 0: automatic,
   // kGroupRaysPerBrick per brick of the store.
   uint64_t max_group_rays = 0;
+  // How long a stream's tracer waits for the next chunk before tracing what
+  // has arrived (stream_pipeline.h, "Gathering"; the server's
+  // --stream-gather-ms). Negative: automatic, kGatherWaitOutOfCore when the
+  // cache cannot hold the scene, else 0 (no waiting).
+  int64_t gather_wait_ms = -1;
 };
+
+// Under a tight budget a stream's chunks are gathered while they keep coming
+// at most this far apart (loopback chunks of 64 k rays arrive ~5 ms apart).
+inline constexpr int64_t kGatherWaitOutOfCore = 50;
 
 // The engine's cost per ray falls with the rays each brick gets per call
 // (1 M incoherent rays on the 732-brick city: 64 k-ray batches cost 1.65x per

@@ -45,6 +45,7 @@ struct ServeArgs {
   int rpc_threads = 64;
   uint32_t max_message_mb = 64;
   int64_t stream_group_rays = 0;  // 0: automatic
+  int64_t stream_gather_ms = -1;  // negative: automatic
   std::string log_level = "info";
 };
 
@@ -89,6 +90,9 @@ int run_serve(const ServeArgs& args) {
   if (args.threads < 0) return report_command_error("serve", "--threads must be >= 0 (0: all cores)");
   if (args.stream_group_rays < 0) {
     return report_command_error("serve", "--stream-group-rays must be >= 0 (0: automatic)");
+  }
+  if (args.stream_gather_ms > 60'000) {
+    return report_command_error("serve", "--stream-gather-ms must be at most 60000 (-1: automatic)");
   }
   if (args.rpc_threads < 2) return report_command_error("serve", "--rpc-threads must be at least 2");
   const auto colon = args.listen.rfind(':');
@@ -137,6 +141,7 @@ int run_serve(const ServeArgs& args) {
   server::ServiceOptions service_options;
   service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
   service_options.max_group_rays = static_cast<uint64_t>(args.stream_group_rays);
+  service_options.gather_wait_ms = args.stream_gather_ms;
   server::SceneQueryService service(**engine, service_options);
 
   grpc::EnableDefaultHealthCheckService(true);
@@ -213,6 +218,10 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--stream-group-rays", args->stream_group_rays,
                   "Most rays of a stream traced in one engine call (chunks that queued up while the "
                   "engine was busy are traced together); 0: 1024 per brick of the store")
+      ->capture_default_str();
+  cmd->add_option("--stream-gather-ms", args->stream_gather_ms,
+                  "Before tracing, wait for a stream's chunks while they come at most this many ms apart, "
+                  "up to --stream-group-rays; -1: 50 when the cache cannot hold the scene, else 0")
       ->capture_default_str();
   cmd->add_option("--log-level", args->log_level, "Log level")
       ->check(CLI::IsMember({"debug", "info", "warn"}))

@@ -19,6 +19,15 @@
 // another thread would outlive the call. gRPC allows one Read and one Write in
 // flight on a stream at a time from different threads.
 //
+// Gathering (gather_wait > 0; the server's default when its cache cannot hold
+// the scene): the tracer does not start on the first chunk that arrives but
+// waits for the group to fill (max_group_rays rays queued, or the input
+// closed), as long as chunks keep coming at most gather_wait apart. Under a
+// tight budget every engine call rebuilds most bricks it touches, so a
+// stream traced chunk by chunk costs a pass over the scene per call; gathered,
+// one. A client that waits for each reply before sending the next chunk gets
+// it gather_wait late, never stuck.
+//
 // Memory is bounded: push waits while max_group_rays rays are queued
 // untraced, and acquire_reply waits while more than max_group_rays rays of
 // replies are queued unwritten.
@@ -73,8 +82,9 @@ class StreamPipeline {
   using Chunks = std::vector<std::unique_ptr<StreamChunk>>;
   using Replies = std::vector<std::unique_ptr<Response>>;
 
-  StreamPipeline(Stream* stream, uint64_t max_group_rays)
-      : stream_(stream), max_group_rays_(max_group_rays) {}
+  StreamPipeline(Stream* stream, uint64_t max_group_rays,
+                 std::chrono::milliseconds gather_wait = std::chrono::milliseconds(0))
+      : stream_(stream), max_group_rays_(max_group_rays), gather_wait_(gather_wait) {}
   ~StreamPipeline() { close_and_wait(); }
   StreamPipeline(const StreamPipeline&) = delete;
   StreamPipeline& operator=(const StreamPipeline&) = delete;
@@ -117,6 +127,13 @@ class StreamPipeline {
     group.clear();
     std::unique_lock lock(mutex_);
     changed_.wait(lock, [&] { return input_closed_ || failed_ || !queued_.empty(); });
+    if (gather_wait_.count() > 0) {
+      const auto full = [&] { return input_closed_ || failed_ || queued_rays_ >= max_group_rays_; };
+      while (!full()) {
+        const std::size_t seen = queued_.size();
+        if (!changed_.wait_for(lock, gather_wait_, [&] { return full() || queued_.size() != seen; })) break;
+      }
+    }
     if (failed_ || queued_.empty()) return false;
     uint64_t rays = 0;
     const v1::QueryRequest& first = queued_.front()->request;
@@ -236,6 +253,7 @@ class StreamPipeline {
 
   Stream* stream_;
   const uint64_t max_group_rays_;
+  const std::chrono::milliseconds gather_wait_;
   std::mutex mutex_;
   std::condition_variable changed_;
   std::deque<std::unique_ptr<StreamChunk>> queued_;  // checked, untraced, in order

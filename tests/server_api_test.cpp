@@ -95,6 +95,19 @@ class ServerApi : public ::testing::Test {
     stub_ = v1::SceneQuery::NewStub(channel_);
   }
 
+  // The engine calls in the server's debug line for the last stream whose
+  // line starts with `stream` (e.g. "IntersectStream: 12 chunks").
+  static int last_stream_engine_calls(const std::string& log, const std::string& stream) {
+    const auto line = log.rfind(stream);
+    EXPECT_NE(line, std::string::npos) << log;
+    if (line == std::string::npos) return -1;
+    const auto calls = log.find(" engine calls", line);
+    EXPECT_NE(calls, std::string::npos) << log.substr(line);
+    if (calls == std::string::npos) return -1;
+    const auto comma = log.rfind(", ", calls);
+    return std::stoi(log.substr(comma + 2, calls - comma - 2));
+  }
+
   static std::vector<Ray> rays(std::size_t n, uint32_t seed) {
     return testing::make_test_rays(engine_->store().manifest().bounds, n, seed);
   }
@@ -476,15 +489,64 @@ TEST_F(ServerApi, ChunksQueuedWhileTheEngineIsBusyAreTracedTogetherWithOneReplyE
   EXPECT_FALSE(stream->Read(&response));
   EXPECT_TRUE(stream->Finish().ok());
   // The server's debug line for the stream: fewer engine calls than chunks.
-  const std::string log = server_->log();
-  const auto line = log.rfind("IntersectStream: 12 chunks");
-  ASSERT_NE(line, std::string::npos) << log;
-  const auto calls = log.find(" engine calls", line);
-  ASSERT_NE(calls, std::string::npos) << log.substr(line);
-  const auto comma = log.rfind(", ", calls);
-  const int engine_calls = std::stoi(log.substr(comma + 2, calls - comma - 2));
+  const int engine_calls = last_stream_engine_calls(server_->log(), "IntersectStream: 12 chunks");
   EXPECT_GE(engine_calls, 3) << "the strict chunk is traced on its own";
-  EXPECT_LT(engine_calls, static_cast<int>(kChunks)) << log.substr(line, 200);
+  EXPECT_LT(engine_calls, static_cast<int>(kChunks));
+}
+
+TEST_F(ServerApi, GatheringTracesAStreamInOneCallAndStillAnswersAClientWaitingForEachReply) {
+  std::string error;
+  auto gathering = ServerProcess::start(
+      store_, {"--log-level", "debug", "--stream-group-rays", "100000", "--stream-gather-ms", "400"}, error);
+  ASSERT_NE(gathering, nullptr) << error;
+  auto stub =
+      v1::SceneQuery::NewStub(grpc::CreateChannel(gathering->address(), grpc::InsecureChannelCredentials()));
+  std::vector<std::vector<Ray>> chunks;
+  for (uint64_t c = 0; c < 8; ++c) chunks.push_back(rays(2000, 70 + c));
+  {
+    // Chunks 20 ms apart: the tracer waits for all of them.
+    grpc::ClientContext context;
+    auto stream = stub->IntersectStream(&context);
+    for (uint64_t c = 0; c < chunks.size(); ++c) {
+      ASSERT_TRUE(stream->Write(make_request(chunks[c], c)));
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    stream->WritesDone();
+    v1::IntersectResponse response;
+    for (uint64_t c = 0; c < chunks.size(); ++c) {
+      ASSERT_TRUE(stream->Read(&response)) << "reply " << c;
+      EXPECT_EQ(response.sequence(), c);
+      EXPECT_TRUE(response.hits() == hit_bytes(serial_hits(chunks[c]))) << "chunk " << c;
+    }
+    EXPECT_TRUE(stream->Finish().ok());
+    EXPECT_EQ(last_stream_engine_calls(gathering->log(), "IntersectStream: 8 chunks"), 1);
+  }
+  {
+    // One chunk, then its reply, then the next: each is traced once the
+    // gathering wait runs out.
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    auto stream = stub->IntersectStream(&context);
+    v1::IntersectResponse response;
+    for (uint64_t c = 0; c < 3; ++c) {
+      const auto start = std::chrono::steady_clock::now();
+      ASSERT_TRUE(stream->Write(make_request(chunks[c], c)));
+      ASSERT_TRUE(stream->Read(&response)) << "reply " << c;
+      EXPECT_GE(std::chrono::steady_clock::now() - start, std::chrono::milliseconds(400));
+      EXPECT_TRUE(response.hits() == hit_bytes(serial_hits(chunks[c]))) << "chunk " << c;
+    }
+    stream->WritesDone();
+    EXPECT_TRUE(stream->Finish().ok());
+    EXPECT_EQ(last_stream_engine_calls(gathering->log(), "IntersectStream: 3 chunks"), 3);
+  }
+  EXPECT_EQ(gathering->stop(SIGTERM), 0) << gathering->log();
+}
+
+TEST_F(ServerApi, StreamGatherOutOfRangeIsRefused) {
+  const SubprocessResult r = testing::run_outcore({"serve", store_, "--stream-gather-ms", "60001"},
+                                                  std::chrono::milliseconds(30'000));
+  EXPECT_NE(r.exit_code, 0);
+  EXPECT_TRUE(contains(r.stderr_text, "--stream-gather-ms must be at most 60000")) << r.describe();
 }
 
 TEST_F(ServerApi, ClientCancellingMidStreamCostsOnlyItsOwnWork) {
