@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # 100 M triangles, bvh bricks: unlimited vs a quarter budget with and without the subtree tier.
 set -euo pipefail
-cd "${1:?usage: subtree_tier_100m.sh WORK_DIR (holding city4883.oc and incoherent.npy from bench/outofcore_bench.py --copies 4883)}"
 O=${OUTCORE:-$(cd "$(dirname "$0")/.." && pwd)/build/client/outcore}
+cd "${1:?usage: subtree_tier_100m.sh WORK_DIR (holding city4883.oc and incoherent.npy from bench/outofcore_bench.py --copies 4883)}"
 uptime
 $O trace city4883.oc --rays incoherent.npy -o bvh-unl.npy --brick-accel bvh --cache-mb 65536 --threads 2 --repeat 3 --stats-json bvh-unl.json > bvh-unl.log 2>&1
 python3 -c "import json;s=json.load(open('bvh-unl.json'));print('unlimited built MiB',s[0]['peak_bytes_resident']/2**20,'cold',s[0]['seconds']['total'],'warm',[r['seconds']['total'] for r in s[1:]])"
