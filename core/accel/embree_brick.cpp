@@ -39,6 +39,9 @@ inline float widen(float t) {
   return t + std::fabs(t) * kMargin;
 }
 
+// How many rays ahead intersect() prefetches a ray and its hit while staging.
+constexpr std::size_t kStagePrefetch = 8;
+
 inline uint64_t id_key(uint32_t geometry_id, uint32_t primitive_id) {
   return (uint64_t{geometry_id} << 32) | primitive_id;
 }
@@ -344,6 +347,11 @@ void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* r
     const std::size_t end = std::min(ray_ids.size(), begin + kChunk);
     std::size_t count = 0;
     for (std::size_t j = begin; j < end; ++j) {
+      // The rays of a queue are scattered over the batch: fetch a few ahead.
+      if (j + kStagePrefetch < end) {
+        __builtin_prefetch(&rays[ray_ids[j + kStagePrefetch]]);
+        __builtin_prefetch(&hits[ray_ids[j + kStagePrefetch]]);
+      }
       const uint32_t i = ray_ids[j];
       const Ray& ray = rays[i];
       const Hit& best = hits[i];

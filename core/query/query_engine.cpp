@@ -57,6 +57,8 @@ struct AdvanceCounters {
 constexpr std::size_t kWindow = 4;
 // Rays per task when tracing inside a brick.
 constexpr std::size_t kRayGrain = 512;
+// How many rays ahead advance() loops prefetch per-ray state.
+constexpr std::size_t kAdvancePrefetch = 8;
 // Rays per task when validating a batch.
 constexpr std::size_t kCheckGrain = 16384;
 
@@ -322,6 +324,14 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   };
   std::vector<Hit>& ahead_hits = scratch->ahead_hits;
   ahead_hits.clear();
+  // The per-ray state advance() reads, fetched a few rays ahead: a queue's
+  // rays are scattered over the batch, and advance() otherwise stalls on
+  // each ray's progress record.
+  auto prefetch_ray_state = [&](uint32_t ray) {
+    __builtin_prefetch(&progress[ray]);
+    __builtin_prefetch(reinterpret_cast<const char*>(&progress[ray]) + sizeof(RayProgress) - 1);
+    if constexpr (kKind == QueryKind::kClosestHit) __builtin_prefetch(&hits[ray].t);
+  };
   // Moves ray i past its current brick; returns the next brick or kInvalidId.
   // A brick whose proxy the ray's remaining segment cannot hit is passed over
   // like a traced brick without a hit (it has none to give), so the ray's
@@ -692,7 +702,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
           trace(pin.accel(), ids);
           if (track_demand)
             demand[task.brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
-          for (const uint32_t ray : ids) {
+          for (std::size_t k = 0; k < ids.size(); ++k) {
+            if (k + kAdvancePrefetch < ids.size()) prefetch_ray_state(ids[k + kAdvancePrefetch]);
+            const uint32_t ray = ids[k];
             const uint32_t next = advance(ray, task.counters);
             if (next != kInvalidId) moved[t].emplace_back(next, ray);
           }
@@ -797,7 +809,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
             if (track_demand)
               demand[brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
             AdvanceCounters counters;
-            for (const uint32_t ray : ids) {
+            for (std::size_t k = 0; k < ids.size(); ++k) {
+              if (k + kAdvancePrefetch < ids.size()) prefetch_ray_state(ids[k + kAdvancePrefetch]);
+              const uint32_t ray = ids[k];
               const uint32_t next = advance(ray, counters);
               if (next != kInvalidId) moved[c].emplace_back(next, ray);
             }
@@ -848,7 +862,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         trace(pin.accel(), batch);
         if (track_demand)
           demand[brick].fetch_sub(static_cast<uint32_t>(batch.size()), std::memory_order_relaxed);
-        for (const uint32_t ray : batch) {
+        for (std::size_t k = 0; k < batch.size(); ++k) {
+          if (k + kAdvancePrefetch < batch.size()) prefetch_ray_state(batch[k + kAdvancePrefetch]);
+          const uint32_t ray = batch[k];
           const uint32_t next = advance(ray, task.counters);
           if (next != kInvalidId) moved[q].emplace_back(next, ray);
         }
