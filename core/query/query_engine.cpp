@@ -324,14 +324,6 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   };
   std::vector<Hit>& ahead_hits = scratch->ahead_hits;
   ahead_hits.clear();
-  // The per-ray state advance() reads, fetched a few rays ahead: a queue's
-  // rays are scattered over the batch, and advance() otherwise stalls on
-  // each ray's progress record.
-  auto prefetch_ray_state = [&](uint32_t ray) {
-    __builtin_prefetch(&progress[ray]);
-    __builtin_prefetch(reinterpret_cast<const char*>(&progress[ray]) + sizeof(RayProgress) - 1);
-    if constexpr (kKind == QueryKind::kClosestHit) __builtin_prefetch(&hits[ray].t);
-  };
   // Moves ray i past its current brick; returns the next brick or kInvalidId.
   // A brick whose proxy the ray's remaining segment cannot hit is passed over
   // like a traced brick without a hit (it has none to give), so the ray's
@@ -413,6 +405,28 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     ++stats.brick_acquisitions;
     ++(pin.was_hit() ? stats.cache_hits : stats.cache_misses);
     return Status::Ok();
+  };
+
+  // The per-ray state advance() reads, fetched a few rays ahead: a queue's
+  // rays are scattered over the batch, and advance() otherwise stalls on
+  // each ray's progress record.
+  auto prefetch_ray_state = [&](uint32_t ray) {
+    __builtin_prefetch(&progress[ray]);
+    __builtin_prefetch(reinterpret_cast<const char*>(&progress[ray]) + sizeof(RayProgress) - 1);
+    if constexpr (kKind == QueryKind::kClosestHit) __builtin_prefetch(&hits[ray].t);
+  };
+  // Traces the rays `ids` queued at `brick` there, then moves each to its
+  // next brick, collecting (next brick, ray) in `moved` for the scheduler.
+  auto trace_and_advance = [&](uint32_t brick, const BrickAccel& accel, std::span<const uint32_t> ids,
+                               AdvanceCounters& counters, std::vector<std::pair<uint32_t, uint32_t>>& moved) {
+    trace(accel, ids);
+    if (track_demand) demand[brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      if (k + kAdvancePrefetch < ids.size()) prefetch_ray_state(ids[k + kAdvancePrefetch]);
+      const uint32_t ray = ids[k];
+      const uint32_t next = advance(ray, counters);
+      if (next != kInvalidId) moved.emplace_back(next, ray);
+    }
   };
 
   if (!options.reorder) {
@@ -629,7 +643,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       std::size_t begin, end;
       AdvanceCounters counters;
       double build_seconds = 0;
-      bool acquired = false, was_hit = false;
+      bool was_hit = false;
       Status status;
     };
     std::vector<WaveTask> tasks;
@@ -695,19 +709,10 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
             return;
           }
           const PinnedBrick pin = std::move(acquired).value();
-          task.acquired = true;
           task.was_hit = pin.was_hit();
           const std::vector<uint32_t>& batch = wave_batches[task.queue];
           const std::span<const uint32_t> ids(batch.data() + task.begin, task.end - task.begin);
-          trace(pin.accel(), ids);
-          if (track_demand)
-            demand[task.brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
-          for (std::size_t k = 0; k < ids.size(); ++k) {
-            if (k + kAdvancePrefetch < ids.size()) prefetch_ray_state(ids[k + kAdvancePrefetch]);
-            const uint32_t ray = ids[k];
-            const uint32_t next = advance(ray, task.counters);
-            if (next != kInvalidId) moved[t].emplace_back(next, ray);
-          }
+          trace_and_advance(task.brick, pin.accel(), ids, task.counters, moved[t]);
         });
         for (std::size_t t = 0; t < tasks.size(); ++t) {
           const WaveTask& task = tasks[t];
@@ -805,16 +810,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
             const std::size_t begin = c * kRayGrain, end = std::min(batch.size(), begin + kRayGrain);
             const std::span<const uint32_t> ids(batch.data() + begin, end - begin);
             moved[c].clear();
-            trace(accel, ids);
-            if (track_demand)
-              demand[brick].fetch_sub(static_cast<uint32_t>(ids.size()), std::memory_order_relaxed);
             AdvanceCounters counters;
-            for (std::size_t k = 0; k < ids.size(); ++k) {
-              if (k + kAdvancePrefetch < ids.size()) prefetch_ray_state(ids[k + kAdvancePrefetch]);
-              const uint32_t ray = ids[k];
-              const uint32_t next = advance(ray, counters);
-              if (next != kInvalidId) moved[c].emplace_back(next, ray);
-            }
+            trace_and_advance(brick, accel, ids, counters, moved[c]);
             chunk_counters[c] = counters;
           });
         });
@@ -858,16 +855,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         }
         const PinnedBrick pin = std::move(acquired).value();
         task.was_hit = pin.was_hit();
-        const std::vector<uint32_t>& batch = wave_batches[q];
-        trace(pin.accel(), batch);
-        if (track_demand)
-          demand[brick].fetch_sub(static_cast<uint32_t>(batch.size()), std::memory_order_relaxed);
-        for (std::size_t k = 0; k < batch.size(); ++k) {
-          if (k + kAdvancePrefetch < batch.size()) prefetch_ray_state(batch[k + kAdvancePrefetch]);
-          const uint32_t ray = batch[k];
-          const uint32_t next = advance(ray, task.counters);
-          if (next != kInvalidId) moved[q].emplace_back(next, ray);
-        }
+        trace_and_advance(brick, pin.accel(), wave_batches[q], task.counters, moved[q]);
         trace_ahead_range(brick, pin.accel(), ahead_begin[q], ahead_begin[q + 1], ahead_counters[q]);
         task.seconds = seconds_since(t0);
       });
