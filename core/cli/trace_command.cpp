@@ -33,6 +33,7 @@ struct TraceArgs {
   bool reference = false;     // float64 ground truth: brick structure "reference"
   bool no_reorder = false;
   bool no_trace_ahead = false;
+  bool no_in_cache_sweep = false;
   bool no_proxies = false;
   std::optional<int64_t> proxy_res;  // unset: the default resolution
   int threads = 0;
@@ -139,6 +140,7 @@ int run_trace(const TraceArgs& args) {
   QueryOptions query_options;
   query_options.reorder = !args.no_reorder;
   query_options.trace_ahead = !args.no_trace_ahead;
+  query_options.in_cache_sweep = !args.no_in_cache_sweep;
   query_options.strict = args.strict;
   // Repeats run the same batch again on the now warm cache (the first run is
   // the cold one: time to first hit); the output is the last run's.
@@ -209,6 +211,9 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--no-trace-ahead", args->no_trace_ahead,
                 "Under a budget smaller than the scene, do not trace rays at a brick being built before they "
                 "reach it (for comparison; answers are the same)");
+  cmd->add_flag("--no-in-cache-sweep", args->no_in_cache_sweep,
+                "When every brick is resident, still queue the batch at bricks instead of sweeping chunks of "
+                "rays through them (for comparison; answers are the same)");
   cmd->add_flag("--no-proxies", args->no_proxies,
                 "Do not skip bricks by their occupancy proxies (for comparison; answers are the same)");
   cmd->add_option("--proxy-res", args->proxy_res,

@@ -1,5 +1,6 @@
 #include "core/query/query_engine.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -82,6 +83,22 @@ struct RayProgress {
   uint8_t listed = 0;
 };
 
+// Rays per task of the in-cache sweep (below): its per-ray state (about 60
+// bytes a ray) and the rays' own records stay in a core's L2 cache.
+constexpr std::size_t kSweepRays = 1024;
+// The in-cache sweep is used for scenes of at most this many bricks.
+constexpr uint32_t kSweepMaxBricks = 16;
+
+// One thread's working memory for the in-cache sweep of one chunk of rays.
+struct SweepScratch {
+  std::array<RayProgress, kSweepRays> progress;
+  std::array<uint32_t, kSweepRays> at;       // the brick each active ray is at
+  std::array<uint32_t, kSweepRays> active;   // chunk-local indices of the rays with a brick to trace
+  std::array<uint32_t, kSweepRays> grouped;  // the active rays' ids, grouped by brick
+  std::vector<uint32_t> group_end;           // per brick; all zero between rounds
+  std::vector<uint32_t> touched;             // bricks with active rays, in first-seen order
+};
+
 // Batches up to this many rays give their scratch back for reuse (about 50
 // bytes per ray); larger ones free it, so one huge batch does not pin its
 // memory for good.
@@ -111,6 +128,7 @@ struct QueryEngine::Scratch {
   std::vector<Hit> ahead_hit_copies;
   std::vector<uint8_t> ahead_occluded;
   std::vector<uint32_t> ahead_outcomes;
+  tbb::enumerable_thread_specific<SweepScratch> sweep;
 };
 
 QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
@@ -242,10 +260,23 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     std::unique_ptr<Scratch>& scratch;
     ~GiveBack() { engine->give_back_scratch(std::move(scratch)); }
   } give_back{this, scratch};
+  // In-cache sweep: when every brick is resident and the budget holds the
+  // scene (nothing can be evicted), queueing the whole batch at bricks buys
+  // no reuse; each task instead takes a chunk of consecutive rays through all
+  // their bricks, round by round, with the chunk's per-ray state kept in the
+  // thread's cache. Each ray visits the same bricks in the same order with
+  // the same hit so far, so answers are the same as queued.
+  const uint32_t brick_count = store_->brick_count();
+  // Only for scenes of a few bricks: with many, a chunk's rays spread over
+  // so many bricks that each visit starts cold in a brick's structure, and
+  // queueing the whole batch at each brick is faster (measured: the 732-brick
+  // city twice as slow swept; docs/BENCHMARKS.md).
+  const bool sweep = options.reorder && options.in_cache_sweep && cache_fits_scene_ &&
+                     brick_count <= kSweepMaxBricks && cache_->counters().resident_bricks == brick_count;
   // Grown only (new elements are value-initialised once); every element
   // below n is overwritten below, in parallel.
-  if (scratch->valid.size() < n) scratch->valid.resize(n);
-  if (scratch->progress.size() < n) scratch->progress.resize(n);
+  if (scratch->valid.size() < n && (!sweep || options.strict)) scratch->valid.resize(n);
+  if (!sweep && scratch->progress.size() < n) scratch->progress.resize(n);
   std::vector<uint8_t>& valid = scratch->valid;
   std::vector<RayProgress>& progress = scratch->progress;
   // A hierarchy of a few bricks is traversed flat (all leaf boxes tested at
@@ -259,7 +290,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // Validation and reset of the outputs and per-ray progress, in parallel
   // chunks; the first bad ray of each chunk is kept so that strict mode names
   // the first of the batch.
-  const std::size_t check_chunks = (n + kCheckGrain - 1) / kCheckGrain;
+  // The in-cache sweep does this in its own chunks (one pass less over the
+  // rays' memory), except in strict mode, where a bad ray must stop the batch
+  // before anything is traced.
+  const bool validate_apart = !sweep || options.strict;
+  const std::size_t check_chunks = validate_apart ? (n + kCheckGrain - 1) / kCheckGrain : 0;
   std::vector<uint64_t> chunk_invalid(check_chunks, 0);
   std::vector<std::size_t> chunk_first_bad(check_chunks, n);
   tbb::parallel_for(std::size_t{0}, check_chunks, [&](std::size_t c) {
@@ -267,7 +302,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     for (std::size_t i = c * kCheckGrain; i < end; ++i) {
       const bool ok = ray_problem(rays[i]) == nullptr;
       valid[i] = ok;
-      progress[i] = RayProgress{};
+      if (!sweep) progress[i] = RayProgress{};
       if (!ok) {
         if (chunk_first_bad[c] == n) chunk_first_bad[c] = i;
         ++chunk_invalid[c];
@@ -307,16 +342,15 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // rays still have the brick ahead of them, in their window of upcoming
   // bricks or in its queue. Counted only when the policy uses hints; one
   // relaxed atomic per window entry and one per traced chunk.
-  const bool track_demand = options.reorder && cache_->wants_schedule_hint();
+  const bool track_demand = options.reorder && !sweep && cache_->wants_schedule_hint();
   std::vector<std::atomic<uint32_t>> demand(track_demand ? store_->brick_count() : 0);
   // Trace-ahead (below) is possible only when the budget cannot hold the scene.
   const bool ahead_possible = options.reorder && options.trace_ahead && !cache_fits_scene_;
   std::vector<std::array<uint32_t, kWindow>>& ahead_state = scratch->ahead_state;
   if (ahead_possible && ahead_state.size() < n) ahead_state.resize(n);
   // Entries traced ahead already gave their demand back (trace_ahead below).
-  auto drop_window = [&](std::size_t i) {
+  auto drop_window = [&](RayProgress& p, std::size_t i) {
     if (!track_demand) return;
-    RayProgress& p = progress[i];
     for (; p.next < p.count; ++p.next) {
       if (!ahead_possible || ahead_state[i][p.next] == kAheadNone)
         demand[p.window[p.next].brick].fetch_sub(1, std::memory_order_relaxed);
@@ -330,12 +364,12 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // hit, horizon and brick order are what they are with proxies off. A brick
   // the ray was traced against ahead of its turn is passed over too, its hit
   // (if any) taken now: the visit happens, only earlier.
-  auto advance = [&](std::size_t i, AdvanceCounters& counters) -> uint32_t {
-    RayProgress& p = progress[i];
+  // `p` is ray i's progress record (progress[i], or the in-cache sweep's own).
+  auto advance_with = [&](RayProgress& p, std::size_t i, AdvanceCounters& counters) -> uint32_t {
     float limit = horizon(i);
     for (;;) {
       if (finished(i)) {
-        drop_window(i);
+        drop_window(p, i);
         return kInvalidId;
       }
       BrickKey key;
@@ -343,7 +377,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       if (p.next < p.count) {
         key = p.window[p.next];
         if (key.entry > limit) {
-          drop_window(i);
+          drop_window(p, i);
           return kInvalidId;
         }
         if (ahead_possible) ahead = ahead_state[i][p.next];
@@ -395,6 +429,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       if (track_demand) demand[key.brick].fetch_sub(1, std::memory_order_relaxed);
     }
   };
+  auto advance = [&](std::size_t i, AdvanceCounters& counters) { return advance_with(progress[i], i, counters); };
 
   auto acquire = [&](uint32_t brick, PinnedBrick& pin) -> Status {
     const auto t0 = Clock::now();
@@ -446,8 +481,145 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       proxy_ticks += counters.proxy_ticks;
       stats.seconds_brick += seconds_since(t0);
     }
+  } else if (sweep) {
+    // Each brick is pinned by the first task to reach it and held to the end
+    // of the batch (a cache hit: all are resident); one lock per brick per
+    // batch, never per ray.
+    std::vector<PinnedBrick> pins(brick_count);
+    std::vector<std::atomic<const BrickAccel*>> pinned(brick_count);
+    std::mutex pin_mutex;
+    Status pin_status;
+    std::atomic<bool> pin_failed{false};
+    auto pinned_accel = [&](uint32_t brick) -> const BrickAccel* {
+      const BrickAccel* accel = pinned[brick].load(std::memory_order_acquire);
+      if (accel != nullptr) return accel;
+      std::lock_guard<std::mutex> lock(pin_mutex);
+      accel = pinned[brick].load(std::memory_order_relaxed);
+      if (accel != nullptr) return accel;
+      const auto t0 = Clock::now();
+      // Isolated: should another batch have evicted the brick, its build must
+      // not pick up one of this batch's tasks, which could wait on this lock.
+      auto acquired = tbb::this_task_arena::isolate([&] { return cache_->acquire(brick); });
+      stats.seconds_build += seconds_since(t0);
+      if (!acquired.ok()) {
+        if (pin_status.ok()) pin_status = acquired.status();
+        pin_failed.store(true, std::memory_order_relaxed);
+        return nullptr;
+      }
+      pins[brick] = std::move(acquired).value();
+      ++stats.brick_acquisitions;
+      ++(pins[brick].was_hit() ? stats.cache_hits : stats.cache_misses);
+      accel = &pins[brick].accel();
+      pinned[brick].store(accel, std::memory_order_release);
+      return accel;
+    };
+    struct SweepTask {
+      AdvanceCounters counters;
+      uint64_t visits = 0;
+      uint64_t ticks = 0;        // the whole task
+      uint64_t trace_ticks = 0;  // inside bricks
+      uint64_t invalid = 0;
+      uint64_t hit = 0;
+    };
+    const std::size_t chunks = (n + kSweepRays - 1) / kSweepRays;
+    std::vector<SweepTask> sweep_tasks(chunks);
+    const auto t_sweep = Clock::now();
+    tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+      const uint64_t task_start = ticks();
+      SweepTask& task = sweep_tasks[c];
+      SweepScratch& local = scratch->sweep.local();
+      if (local.group_end.size() < brick_count) local.group_end.assign(brick_count, 0);
+      const std::size_t base = c * kSweepRays;
+      const std::size_t size = std::min(n - base, kSweepRays);
+      std::size_t active = 0;
+      for (std::size_t k = 0; k < size; ++k) {
+        if (validate_apart) {
+          if (!valid[base + k]) continue;
+        } else {
+          if constexpr (kKind == QueryKind::kClosestHit) {
+            hits[base + k] = Hit{};
+          } else {
+            occluded[base + k] = 0;
+          }
+          if (ray_problem(rays[base + k]) != nullptr) {
+            ++task.invalid;
+            continue;
+          }
+        }
+        local.progress[k] = RayProgress{};
+        const uint32_t brick = advance_with(local.progress[k], base + k, task.counters);
+        if (brick == kInvalidId) continue;
+        local.at[k] = brick;
+        local.active[active++] = static_cast<uint32_t>(k);
+      }
+      // Rounds: the active rays are grouped by their brick (a counting sort,
+      // stable, so each group keeps input order), each group is traced, and
+      // each ray moves on to its next brick.
+      while (active > 0 && !pin_failed.load(std::memory_order_relaxed)) {
+        local.touched.clear();
+        for (std::size_t j = 0; j < active; ++j) {
+          const uint32_t brick = local.at[local.active[j]];
+          if (local.group_end[brick]++ == 0) local.touched.push_back(brick);
+        }
+        uint32_t offset = 0;
+        for (const uint32_t brick : local.touched) {
+          const uint32_t count = local.group_end[brick];
+          local.group_end[brick] = offset;
+          offset += count;
+        }
+        for (std::size_t j = 0; j < active; ++j) {
+          const uint32_t k = local.active[j];
+          local.grouped[local.group_end[local.at[k]]++] = static_cast<uint32_t>(base + k);
+        }
+        active = 0;
+        uint32_t begin = 0;
+        for (const uint32_t brick : local.touched) {
+          const uint32_t end = local.group_end[brick];
+          local.group_end[brick] = 0;
+          const std::span<const uint32_t> ids(local.grouped.data() + begin, end - begin);
+          begin = end;
+          const BrickAccel* accel = pinned_accel(brick);
+          if (accel == nullptr) continue;  // the batch fails: the error is returned below
+          const uint64_t trace_start = ticks();
+          trace(*accel, ids);
+          task.trace_ticks += ticks() - trace_start;
+          task.visits += ids.size();
+          for (const uint32_t ray : ids) {
+            const uint32_t k = ray - static_cast<uint32_t>(base);
+            const uint32_t next = advance_with(local.progress[k], ray, task.counters);
+            if (next == kInvalidId) continue;
+            local.at[k] = next;
+            local.active[active++] = k;
+          }
+        }
+      }
+      for (std::size_t i = base; i < base + size; ++i) {
+        if constexpr (kKind == QueryKind::kClosestHit) {
+          task.hit += hits[i].is_hit();
+        } else {
+          task.hit += occluded[i] != 0;
+        }
+      }
+      task.ticks = ticks() - task_start;
+    });
+    OUTCORE_RETURN_IF_ERROR(pin_status);
+    uint64_t task_ticks = 0, trace_ticks = 0;
+    for (const SweepTask& task : sweep_tasks) {
+      task.counters.add_to(stats);
+      proxy_ticks += task.counters.proxy_ticks;
+      stats.brick_visits += task.visits;
+      if (!validate_apart) stats.invalid_rays += task.invalid;
+      stats.rays_hit += task.hit;
+      task_ticks += task.ticks;
+      trace_ticks += task.trace_ticks;
+    }
+    // Upper traversal and tracing interleave: the wall time is split in the
+    // proportion of the tasks' own times.
+    const double wall = seconds_since(t_sweep) - stats.seconds_build;
+    const double brick_share = task_ticks > 0 ? static_cast<double>(trace_ticks) / task_ticks : 0;
+    stats.seconds_brick += std::max(0.0, wall) * brick_share;
+    stats.seconds_upper += std::max(0.0, wall) * (1 - brick_share);
   } else {
-    const uint32_t brick_count = store_->brick_count();
     std::vector<std::vector<uint32_t>>& queues = scratch->queues;
     if (queues.size() < brick_count) queues.resize(brick_count);
     for (auto& queue : queues) queue.clear();  // a failed batch may have left rays
@@ -882,8 +1054,10 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     }
   }
 
-  std::vector<uint64_t> chunk_hits(check_chunks, 0);  // counted in parallel, summed in order
-  tbb::parallel_for(std::size_t{0}, check_chunks, [&](std::size_t c) {
+  // Counted in parallel, summed in order (by the sweep's own tasks when it ran).
+  const std::size_t count_chunks = sweep ? 0 : (n + kCheckGrain - 1) / kCheckGrain;
+  std::vector<uint64_t> chunk_hits(count_chunks, 0);
+  tbb::parallel_for(std::size_t{0}, count_chunks, [&](std::size_t c) {
     uint64_t hit = 0;
     for (std::size_t i = c * kCheckGrain; i < std::min(n, (c + 1) * kCheckGrain); ++i) {
       if constexpr (kKind == QueryKind::kClosestHit) {

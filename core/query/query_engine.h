@@ -76,6 +76,11 @@ struct QueryOptions {
   // traced by the rays that will reach it later, so that it need not be
   // built again for them (query_engine.cpp). Answers are the same either way.
   bool trace_ahead = true;
+  // When every brick is resident and the budget holds the scene, threads
+  // take chunks of consecutive rays through all their bricks instead of
+  // queueing the batch at bricks (query_engine.cpp). Answers are the same
+  // either way; false forces the queues (for comparison).
+  bool in_cache_sweep = true;
 };
 
 struct QueryStats {
