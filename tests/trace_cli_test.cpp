@@ -364,6 +364,38 @@ TEST_F(TraceCli, SameAnswerWithoutReordering) {
   expect_reference_answer({"--no-reorder"});
 }
 
+// On a store of a few bricks the warm run of a repeat sweeps ray chunks
+// through the resident bricks (each taken from the cache once); with the
+// flag it queues them (one acquisition per 512-ray chunk). Same hits.
+TEST_F(TraceCli, TheInCacheSweepAndTheQueuesGiveTheSameHits) {
+  TempDir out;
+  const std::string store = out.file("few");
+  const SubprocessResult packed =
+      outcore({"pack", "gen:sphere?level=5", "-o", store, "--brick-tris", "4000", "-q", "--no-sync"});
+  ASSERT_TRUE(packed.succeeded()) << packed.describe();
+  const auto few = SceneStore::open(store);
+  ASSERT_TRUE(few.ok()) << few.status().to_string();
+  const uint64_t bricks = (*few)->brick_count();
+  ASSERT_GT(bricks, 1u);
+  ASSERT_LE(bricks, 16u);
+  const std::string rays = out.file("rays.npy");
+  ASSERT_TRUE(write_rays_npy(rays, testing::make_test_rays((*few)->manifest().bounds, 4000, 77)).ok());
+  const std::string swept_json = out.file("swept.json"), queued_json = out.file("queued.json");
+  const SubprocessResult swept = outcore({"trace", store, "--rays", rays, "-o", out.file("swept.npy"),
+                                          "--repeat", "2", "--stats-json", swept_json});
+  ASSERT_TRUE(swept.succeeded()) << swept.describe();
+  const SubprocessResult queued =
+      outcore({"trace", store, "--rays", rays, "-o", out.file("queued.npy"), "--repeat", "2",
+               "--no-in-cache-sweep", "--stats-json", queued_json});
+  ASSERT_TRUE(queued.succeeded()) << queued.describe();
+  EXPECT_EQ(read_bytes(out.file("swept.npy")), read_bytes(out.file("queued.npy")));
+  const std::string swept_stats = read_bytes(swept_json), queued_stats = read_bytes(queued_json);
+  EXPECT_LE(json_uint(swept_stats, "brick_acquisitions", 1), bricks);
+  EXPECT_GT(json_uint(queued_stats, "brick_acquisitions", 1), bricks);
+  EXPECT_EQ(json_uint(swept_stats, "brick_visits", 1), json_uint(queued_stats, "brick_visits", 1));
+  EXPECT_EQ(json_uint(swept_stats, "rays_hit", 1), json_uint(queued_stats, "rays_hit", 1));
+}
+
 TEST_F(TraceCli, SameAnswerWithATinyCache) {
   TempDir out;
   const std::string json = out.file("stats.json");

@@ -429,7 +429,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       if (track_demand) demand[key.brick].fetch_sub(1, std::memory_order_relaxed);
     }
   };
-  auto advance = [&](std::size_t i, AdvanceCounters& counters) { return advance_with(progress[i], i, counters); };
+  auto advance = [&](std::size_t i, AdvanceCounters& counters) {
+    return advance_with(progress[i], i, counters);
+  };
 
   auto acquire = [&](uint32_t brick, PinnedBrick& pin) -> Status {
     const auto t0 = Clock::now();

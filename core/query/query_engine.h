@@ -13,7 +13,9 @@
 // scene, a brick being built is also traced by the rays that reach it later
 // ("trace-ahead"); each keeps the outcome until its own turn there, so its
 // visits and answer are unchanged and the brick need not be built again for
-// it (docs/DESIGN.md).
+// it (docs/DESIGN.md). When a scene of a few bricks is wholly resident under a
+// budget that holds it, threads instead take chunks of consecutive rays
+// through all their bricks ("in-cache sweep"): same visits, same answers.
 //
 // Brick proxies (core/proxy, on by default): before a ray is queued at a
 // brick, its segment is marched through the brick's resident occupancy grid;

@@ -353,6 +353,74 @@ TEST(QueryEngine, InvalidRaysAreCountedMissesOrAStrictErrorNamingTheFirst) {
   EXPECT_NE(s.message().find("ray 1: direction is zero"), std::string::npos) << s.message();
 }
 
+// A scene of a few bricks, all resident under a budget that holds it: the
+// in-cache sweep answers (ray chunks through all their bricks) bitwise as the
+// queues do, counts the same visits, nodes, hits and invalid rays, and takes
+// each brick from the cache at most once per batch.
+TEST(QueryEngine, InCacheSweepAnswersAndCountsExactlyAsTheQueues) {
+  const auto scene = pack({"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5"}, 1200);
+  auto engine = engine_for(*scene);
+  ASSERT_GT(engine->store().brick_count(), 1u);
+  ASSERT_LE(engine->store().brick_count(), 16u);
+  auto rays = mixed_rays(scene->bounds, 5000, 21);  // several 1024-ray chunks
+  rays[17].direction = {0, 0, 0};
+  rays[3001].origin.y = std::numeric_limits<float>::quiet_NaN();
+  QueryOptions queued;
+  queued.in_cache_sweep = false;
+  QueryStats cold;
+  const std::vector<Hit> expected = intersect(*engine, rays, queued, &cold);
+  EXPECT_GT(cold.brick_builds, 0u);
+  expect_matches_reference(*scene, rays, expected);
+
+  QueryStats queued_stats, sweep_stats;
+  EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, queued, &queued_stats), expected));
+  EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, {}, &sweep_stats), expected));
+  EXPECT_EQ(sweep_stats.rays_hit, queued_stats.rays_hit);
+  EXPECT_EQ(sweep_stats.invalid_rays, 2u);
+  EXPECT_EQ(queued_stats.invalid_rays, 2u);
+  EXPECT_EQ(sweep_stats.brick_visits, queued_stats.brick_visits);
+  EXPECT_EQ(sweep_stats.upper_nodes_visited, queued_stats.upper_nodes_visited);
+  EXPECT_EQ(sweep_stats.brick_builds, 0u);
+  EXPECT_LE(sweep_stats.brick_acquisitions, engine->store().brick_count());
+  EXPECT_GT(queued_stats.brick_acquisitions, engine->store().brick_count())
+      << "the queues trace 512-ray chunks";
+  EXPECT_EQ(sweep_stats.cache_hits, sweep_stats.brick_acquisitions);
+
+  // Any hit, thread counts, strict mode.
+  std::vector<uint8_t> occluded_queued(rays.size()), occluded_swept(rays.size());
+  QueryStats any_queued, any_swept;
+  ASSERT_TRUE(engine->occluded(rays, occluded_queued, queued, &any_queued).ok());
+  ASSERT_TRUE(engine->occluded(rays, occluded_swept, {}, &any_swept).ok());
+  EXPECT_EQ(occluded_swept, occluded_queued);
+  EXPECT_EQ(any_swept.rays_hit, any_queued.rays_hit);
+  EXPECT_EQ(any_swept.brick_visits, any_queued.brick_visits);
+  for (const int threads : {1, 2, 4}) {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+    EXPECT_TRUE(bitwise_equal(intersect(*engine, rays), expected)) << threads << " threads";
+  }
+  QueryOptions strict;
+  strict.strict = true;
+  std::vector<Hit> out(rays.size());
+  const Status s = engine->intersect(rays, out, strict);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("ray 17: direction is zero"), std::string::npos) << s.message();
+
+  // Concurrent swept batches: each gets its serial answer.
+  std::vector<std::vector<Ray>> batches;
+  std::vector<std::vector<Hit>> serial;
+  for (int b = 0; b < 4; ++b) {
+    batches.push_back(mixed_rays(scene->bounds, 2500, 40 + b));
+    serial.push_back(intersect(*engine, batches.back(), queued));
+  }
+  std::vector<std::vector<Hit>> got(batches.size());
+  std::vector<std::thread> threads;
+  for (std::size_t b = 0; b < batches.size(); ++b)
+    threads.emplace_back([&, b] { got[b] = intersect(*engine, batches[b]); });
+  for (auto& t : threads) t.join();
+  for (std::size_t b = 0; b < batches.size(); ++b)
+    EXPECT_TRUE(bitwise_equal(got[b], serial[b])) << "batch " << b;
+}
+
 TEST(QueryEngine, ConcurrentBatchesShareOneCacheAndEachGetsItsSerialAnswer) {
   const auto scene = pack({"gen:city?of=(gen:sphere?level=3)&copies=40"}, 300);
   auto reference = engine_for(*scene);
