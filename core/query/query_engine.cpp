@@ -12,6 +12,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <optional>
 
 #include "core/upper/upper_traversal.h"
 #include "core/util/json_writer.h"
@@ -810,27 +811,46 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     stats.seconds_upper = seconds_since(t_upper);
 
     std::vector<std::vector<std::pair<uint32_t, uint32_t>>> moved;  // per task: (next brick, ray)
-    // One task of a wave: a chunk of one resident brick's queue.
-    struct WaveTask {
-      uint32_t brick;
-      uint32_t queue;  // index into wave_batches
-      std::size_t begin, end;
+    // What a parallel task that takes a brick from the cache reports.
+    struct PinningTask {
       AdvanceCounters counters;
       double build_seconds = 0;
       bool was_hit = false;
       Status status;
+    };
+    // Takes `brick` from the cache for `task`; nullopt (the error kept in
+    // the task) when it cannot be had.
+    auto pin_for = [&](uint32_t brick, PinningTask& task) -> std::optional<PinnedBrick> {
+      const auto t0 = Clock::now();
+      auto acquired = cache_->acquire(brick);
+      task.build_seconds = seconds_since(t0);
+      if (!acquired.ok()) {
+        task.status = acquired.status();
+        return std::nullopt;
+      }
+      task.was_hit = acquired->was_hit();
+      return std::move(acquired).value();
+    };
+    // Adds a finished task's figures to the batch's (in task order).
+    auto merge = [&](const PinningTask& task) {
+      task.counters.add_to(stats);
+      proxy_ticks += task.counters.proxy_ticks;
+      ++stats.brick_acquisitions;
+      ++(task.was_hit ? stats.cache_hits : stats.cache_misses);
+    };
+    // One task of a wave: a chunk of one resident brick's queue.
+    struct WaveTask : PinningTask {
+      uint32_t brick;
+      uint32_t queue;  // index into wave_batches
+      std::size_t begin, end;
     };
     std::vector<WaveTask> tasks;
     std::vector<std::vector<uint32_t>>& wave_batches = scratch->wave_batches;
     std::vector<uint32_t> resident_now, not_resident;
     std::vector<uint32_t> schedule_hint;
     // Bricks built at once when nothing waiting is resident, one task each.
-    struct BuildTask {
-      AdvanceCounters counters;
-      double build_seconds = 0;
+    struct BuildTask : PinningTask {
       double seconds = 0;  // the whole task
-      bool was_hit = false;
-      Status status;
     };
     const std::size_t build_slots = static_cast<std::size_t>(
         std::max(1, std::min<int>(tbb::this_task_arena::max_concurrency(),
@@ -875,34 +895,26 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         tbb::parallel_for(std::size_t{0}, tasks.size(), [&](std::size_t t) {
           WaveTask& task = tasks[t];
           moved[t].clear();
-          const auto t0 = Clock::now();
-          auto acquired = cache_->acquire(task.brick);
-          task.build_seconds = seconds_since(t0);
-          if (!acquired.ok()) {
-            task.status = acquired.status();
-            return;
-          }
-          const PinnedBrick pin = std::move(acquired).value();
-          task.was_hit = pin.was_hit();
+          const std::optional<PinnedBrick> pin = pin_for(task.brick, task);
+          if (!pin) return;
           const std::vector<uint32_t>& batch = wave_batches[task.queue];
           const std::span<const uint32_t> ids(batch.data() + task.begin, task.end - task.begin);
-          trace_and_advance(task.brick, pin.accel(), ids, task.counters, moved[t]);
+          trace_and_advance(task.brick, pin->accel(), ids, task.counters, moved[t]);
         });
         for (std::size_t t = 0; t < tasks.size(); ++t) {
           const WaveTask& task = tasks[t];
           OUTCORE_RETURN_IF_ERROR(task.status);
-          task.counters.add_to(stats);
-          proxy_ticks += task.counters.proxy_ticks;
+          merge(task);
           stats.seconds_build += task.build_seconds;
-          ++stats.brick_acquisitions;
-          ++(task.was_hit ? stats.cache_hits : stats.cache_misses);
           for (const auto& [next, ray] : moved[t]) enqueue(next, ray);
         }
         // Once the cache has had to evict, a resident brick may be gone when
         // the rays with it further on get there: they are traced now.
         if (ahead_possible && cache_->counters().evictions > counters_before.evictions) {
           for (const uint32_t b : resident_now) {
-            if (upcoming[b].empty()) continue;
+            // One a concurrent batch has evicted since is not rebuilt for
+            // this: its listed rays stay listed for when it is built again.
+            if (upcoming[b].empty() || !cache_->is_resident(b)) continue;
             PinnedBrick pin;
             OUTCORE_RETURN_IF_ERROR(acquire(b, pin));
             trace_ahead(b, pin.accel());
@@ -1021,16 +1033,10 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         moved[q].clear();
         const uint32_t brick = building[q];
         const auto t0 = Clock::now();
-        auto acquired = cache_->acquire(brick);
-        task.build_seconds = seconds_since(t0);
-        if (!acquired.ok()) {
-          task.status = acquired.status();
-          return;
-        }
-        const PinnedBrick pin = std::move(acquired).value();
-        task.was_hit = pin.was_hit();
-        trace_and_advance(brick, pin.accel(), wave_batches[q], task.counters, moved[q]);
-        trace_ahead_range(brick, pin.accel(), ahead_begin[q], ahead_begin[q + 1], ahead_counters[q]);
+        const std::optional<PinnedBrick> pin = pin_for(brick, task);
+        if (!pin) return;
+        trace_and_advance(brick, pin->accel(), wave_batches[q], task.counters, moved[q]);
+        trace_ahead_range(brick, pin->accel(), ahead_begin[q], ahead_begin[q + 1], ahead_counters[q]);
         task.seconds = seconds_since(t0);
       });
       double task_build_seconds = 0, task_seconds = 0;
@@ -1038,12 +1044,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         const BuildTask& task = build_tasks[q];
         OUTCORE_RETURN_IF_ERROR(task.status);
         if (!known_resident.empty()) known_resident[building[q]] = 1;
-        task.counters.add_to(stats);
-        proxy_ticks += task.counters.proxy_ticks;
+        merge(task);
         task_build_seconds += task.build_seconds;
         task_seconds += task.seconds;
-        ++stats.brick_acquisitions;
-        ++(task.was_hit ? stats.cache_hits : stats.cache_misses);
         for (const auto& [next, ray] : moved[q]) enqueue(next, ray);
       }
       file_ahead();
