@@ -27,16 +27,13 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
-import time
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from trace_bench import HIT_DTYPE, read_store_triangles  # noqa: E402
+from common import HIT_DTYPE, OUTCORE, ROOT, open3d_scene, open3d_timed_cast, read_store_triangles, run  # noqa: E402,F401
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MODELS = os.path.join(ROOT, "..", "shared", "models")
 CONFIGS = {
     "embree": [],
@@ -58,16 +55,6 @@ AIMED_SCENES = {
     "sphere +1e5": ("gen:sphere?level=5&cx=1e5&cy=1e5&cz=1e5", (1e5, 1e5, 1e5)),
 }
 TIE = 1e-6
-OUTCORE = os.path.join(ROOT, "build", "client", "outcore")
-
-
-def run(cmd):
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit(f"failed: {' '.join(cmd)}\n{r.stderr}")
-    return r.stdout
-
-
 def pack(work, name, inputs, brick_tris):
     store = os.path.join(work, name.replace(" ", "_") + ".oc")
     if not os.path.isdir(store):
@@ -87,23 +74,8 @@ def trace(store, rays_path, out, extra, runs=1):
     return np.load(out), statistics.median(warm)
 
 
-def open3d_scene(tris):
-    import open3d as o3d
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(tris.reshape(-1, 3))),
-                        o3d.core.Tensor(np.arange(tris.shape[0] * 3, dtype=np.uint32).reshape(-1, 3)))
-    return scene
-
-
 def open3d_cast(scene, rays, ids, runs):
-    import open3d as o3d
-    rays_t = o3d.core.Tensor(rays)
-    scene.cast_rays(rays_t[:1], nthreads=2)  # Open3D builds its BVH on the first call
-    times, result = [], None
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        result = scene.cast_rays(rays_t, nthreads=2)
-        times.append(time.perf_counter() - t0)
+    seconds, result = open3d_timed_cast(scene, rays, runs)
     prims = result["primitive_ids"].numpy()
     hit = prims != 0xFFFFFFFF
     safe = np.minimum(prims, len(ids) - 1)
@@ -111,7 +83,7 @@ def open3d_cast(scene, rays, ids, runs):
     hits["t_hit"] = result["t_hit"].numpy()
     hits["geometry_id"] = np.where(hit, ids[safe, 0], 0xFFFFFFFF)
     hits["primitive_id"] = np.where(hit, ids[safe, 1], 0xFFFFFFFF)
-    return hits, statistics.median(times)
+    return hits, seconds
 
 
 def compare(hits, ref):

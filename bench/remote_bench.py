@@ -40,17 +40,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from trace_bench import SCENES, read_store_triangles  # noqa: E402
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-OUTCORE = os.path.join(ROOT, "build", "client", "outcore")
-
-
-def run(cmd):
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit(f"failed: {' '.join(cmd)}\n{r.stderr}")
-    return r.stdout
+from common import OUTCORE, ROOT, open3d_scene, open3d_timed_cast, prepare_store, read_store_triangles, run  # noqa: E402,F401
+from trace_bench import SCENES  # noqa: E402
 
 
 class Server:
@@ -98,18 +89,7 @@ def trace_warm(store, rays_path, out, runs):
 
 
 def open3d_time(tris, rays, runs):
-    import open3d as o3d
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.ascontiguousarray(tris.reshape(-1, 3))),
-                        o3d.core.Tensor(np.arange(tris.shape[0] * 3, dtype=np.uint32).reshape(-1, 3)))
-    rays_t = o3d.core.Tensor(rays)
-    scene.cast_rays(rays_t[:1], nthreads=2)  # Open3D builds its BVH on the first call
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        scene.cast_rays(rays_t, nthreads=2)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    return open3d_timed_cast(open3d_scene(tris), rays, runs)[0]
 
 
 def latency(client, rays, calls):
@@ -145,19 +125,15 @@ def main():
     ap.add_argument("--outcore", default=OUTCORE)
     ap.add_argument("--json")
     a = ap.parse_args()
+    if a.runs < 2:
+        ap.error("--runs must be at least 2 (`outcore query` times each call of a --repeat of 2 or more)")
     OUTCORE = os.path.abspath(a.outcore)
     import outcore
     os.makedirs(a.work, exist_ok=True)
     load_before = os.getloadavg()[0]
     rows, lat, wire = [], None, None
     for name in a.scenes.split(","):
-        store = os.path.join(a.work, name + ".oc")
-        if not os.path.isdir(store):
-            print(f"packing {name}", flush=True)
-            run([OUTCORE, "pack", *SCENES[name], "-o", store, "-q"])
-        info = os.path.join(a.work, name + ".json")
-        with open(info, "w") as f:
-            f.write(run([OUTCORE, "info", store, "--json"]))
+        store, info = prepare_store(OUTCORE, a.work, name, SCENES[name])
         tris, _ = read_store_triangles(store)
         server = Server(store)
         try:

@@ -20,61 +20,24 @@ import argparse
 import json
 import os
 import statistics
-import subprocess
 import sys
-import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-OUTCORE = os.path.join(ROOT, "build", "client", "outcore")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from common import (OUTCORE, ROOT, make_rays, open3d_scene, open3d_timed_cast,  # noqa: E402,F401
+                    prepare_store, read_store_triangles, run)
+
 SCENES = {
     "bunny": [os.path.join(ROOT, "..", "shared", "models", "stanford-bunny.obj")],
     "city": ["gen:city?of=(gen:sphere?level=5)&copies=732"],  # 14.99 M triangles
 }
 CACHE_MB = 8192
-HIT_DTYPE = np.dtype([("t_hit", "<f4"), ("geometry_id", "<u4"), ("primitive_id", "<u4"), ("u", "<f4"),
-                      ("v", "<f4"), ("ng", "<f4", (3,))])
-
-
-def run(cmd):
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit(f"failed: {' '.join(cmd)}\n{r.stderr}")
-    return r.stdout
-
-
-def read_store_triangles(store):
-    """Triangles and ids in brick-file order, from the self-describing brick headers."""
-    data = np.fromfile(os.path.join(store, "bricks.dat"), dtype=np.uint8)
-    tris, ids, offset = [], [], 0
-    while offset + 32 <= data.size:
-        header = data[offset:offset + 32]
-        if bytes(header[:7]) != b"OCBRICK":
-            offset += 4096
-            continue
-        count = int(header[12:16].view("<u4")[0])
-        body = offset + 32
-        tris.append(data[body:body + count * 36].view("<f4").reshape(count, 9))
-        ids.append(data[body + count * 36:body + count * 44].view("<u4").reshape(count, 2))
-        offset = (body + count * 44 + 4095) // 4096 * 4096
-    return np.concatenate(tris), np.concatenate(ids)
 
 
 def open3d_cast(tris, rays, runs):
-    import open3d as o3d
-    scene = o3d.t.geometry.RaycastingScene()
-    vertices = o3d.core.Tensor(np.ascontiguousarray(tris.reshape(-1, 3)))
-    indices = o3d.core.Tensor(np.arange(tris.shape[0] * 3, dtype=np.uint32).reshape(-1, 3))
-    scene.add_triangles(vertices, indices)
-    rays_t = o3d.core.Tensor(rays)
-    scene.cast_rays(rays_t[:1], nthreads=2)  # Open3D builds its BVH on the first call
-    times, result = [], None
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        result = scene.cast_rays(rays_t, nthreads=2)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), result["primitive_ids"].numpy()
+    seconds, result = open3d_timed_cast(open3d_scene(tris), rays, runs)
+    return seconds, result["primitive_ids"].numpy()
 
 
 def outcore_trace(store, rays_path, out, runs, extra):
@@ -109,20 +72,13 @@ def main():
     os.makedirs(a.work, exist_ok=True)
     rows = []
     for name in a.scenes.split(","):
-        store = os.path.join(a.work, name + ".oc")
-        if not os.path.isdir(store):
-            print(f"packing {name}", flush=True)
-            run([OUTCORE, "pack", *SCENES[name], "-o", store, "-q"])
-        info = os.path.join(a.work, name + ".json")
-        with open(info, "w") as f:
-            f.write(run([OUTCORE, "info", store, "--json"]))
+        store, info = prepare_store(OUTCORE, a.work, name, SCENES[name])
         with open(info) as f:
             bricks = json.load(f)["bricks"]
         tris, ids = read_store_triangles(store)
         for kind in ["incoherent", "camera"]:
             rays_path = os.path.join(a.work, f"{name}-{kind}.npy")
-            run([sys.executable, os.path.join(ROOT, "bench", "make_rays.py"), info, kind, str(a.rays), rays_path])
-            rays = np.load(rays_path)
+            rays = make_rays(info, kind, a.rays, rays_path)
             out = os.path.join(a.work, f"{name}-{kind}-hits.npy")
             cold, warm, warm_stats = outcore_trace(store, rays_path, out, a.runs, [])
             _, warm_noreorder, _ = outcore_trace(store, rays_path, out + ".noreorder.npy", min(a.runs, 3),
