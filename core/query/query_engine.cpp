@@ -303,7 +303,6 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     for (std::size_t i = c * kCheckGrain; i < end; ++i) {
       const bool ok = ray_problem(rays[i]) == nullptr;
       valid[i] = ok;
-      if (!sweep) progress[i] = RayProgress{};
       if (!ok) {
         if (chunk_first_bad[c] == n) chunk_first_bad[c] = i;
         ++chunk_invalid[c];
@@ -471,6 +470,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     // One ray at a time, in input order, brick by brick.
     for (std::size_t i = 0; i < n; ++i) {
       if (!valid[i]) continue;
+      progress[i] = RayProgress{};
       const uint32_t id = static_cast<uint32_t>(i);
       const auto t0 = Clock::now();
       AdvanceCounters counters;
@@ -797,6 +797,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
       AdvanceCounters counters;
       for (std::size_t i = c * kRayGrain; i < std::min(n, (c + 1) * kRayGrain); ++i) {
+        // Reset here, not in the validation pass: one pass over this memory.
+        progress[i] = RayProgress{};
         first[i] = valid[i] ? advance(i, counters) : kInvalidId;
       }
       chunk_counters[c] = counters;
