@@ -30,7 +30,10 @@
 //
 // Memory is bounded: push waits while max_group_rays rays are queued
 // untraced, and acquire_reply waits while more than max_group_rays rays of
-// replies are queued unwritten.
+// replies are unwritten and two are still queued for the writer: a reply
+// being written and one queued while the next group is traced (without that
+// allowance, a chunk larger than max_group_rays would make tracing wait for
+// each write: measured 17-27 ms per 1 M bunny rays in 65,536-ray chunks).
 //
 // Thread-safety: push/spare_chunk/close_and_wait are for the handler thread,
 // take_group/recycle/acquire_reply/post_replies/fail for the tracer thread
@@ -166,7 +169,8 @@ class StreamPipeline {
   bool acquire_replies(size_t count, Replies& replies) {
     const auto start = std::chrono::steady_clock::now();
     std::unique_lock lock(mutex_);
-    changed_.wait(lock, [&] { return failed_ || unwritten_rays_ <= max_group_rays_; });
+    changed_.wait(lock,
+                  [&] { return failed_ || unwritten_rays_ <= max_group_rays_ || to_write_.size() < 2; });
     times_.waiting_to_reply += seconds_since(start);
     if (failed_) return false;
     replies.clear();
