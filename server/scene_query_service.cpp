@@ -6,6 +6,7 @@
 #include <cstring>
 #include <vector>
 
+#include "proto/outcore/v1/query_stats_fields.h"
 #include "server/grpc_status.h"
 #include "server/stream_pipeline.h"
 
@@ -39,18 +40,11 @@ std::string where(const BatchPosition& position) {
   return position.streamed ? "chunk " + std::to_string(position.chunk) : std::string("request");
 }
 
+// The one conversion of the engine's figures into the wire's.
 void fill_stats(const QueryStats& stats, v1::QueryStats* out) {
-  out->set_rays(stats.rays);
-  out->set_invalid_rays(stats.invalid_rays);
-  out->set_rays_hit(stats.rays_hit);
-  out->set_brick_visits(stats.brick_visits);
-  out->set_brick_acquisitions(stats.brick_acquisitions);
-  out->set_cache_hits(stats.cache_hits);
-  out->set_cache_misses(stats.cache_misses);
-  out->set_brick_builds(stats.brick_builds);
-  out->set_evictions(stats.evictions);
-  out->set_seconds_total(stats.seconds_total);
-  out->set_seconds_build(stats.seconds_build);
+#define OUTCORE_SET_WIRE_FIELD(name) out->set_##name(stats.name);
+  OUTCORE_WIRE_QUERY_STATS(OUTCORE_SET_WIRE_FIELD)
+#undef OUTCORE_SET_WIRE_FIELD
 }
 
 #define OUTCORE_RETURN_IF_GRPC_ERROR(expr) \
@@ -143,6 +137,10 @@ Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v
     invalid_rays_.fetch_add(stats->invalid_rays, std::memory_order_relaxed);
     nanoseconds_tracing_.fetch_add(static_cast<uint64_t>(stats->seconds_total * 1e9),
                                    std::memory_order_relaxed);
+    brick_visits_.fetch_add(stats->brick_visits, std::memory_order_relaxed);
+    proxy_tests_.fetch_add(stats->proxy_tests, std::memory_order_relaxed);
+    bricks_skipped_by_proxy_.fetch_add(stats->bricks_skipped_by_proxy, std::memory_order_relaxed);
+    rays_traced_ahead_.fetch_add(stats->rays_traced_ahead, std::memory_order_relaxed);
   }
   return status;
 }
@@ -392,6 +390,10 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   response->set_rays_hit(c.rays_hit);
   response->set_invalid_rays(c.invalid_rays);
   response->set_seconds_tracing(c.seconds_tracing);
+  response->set_brick_visits(c.brick_visits);
+  response->set_proxy_tests(c.proxy_tests);
+  response->set_bricks_skipped_by_proxy(c.bricks_skipped_by_proxy);
+  response->set_rays_traced_ahead(c.rays_traced_ahead);
   const CacheCounters cache = engine_.cache().counters();
   response->set_cache_hits(cache.hits);
   response->set_cache_misses(cache.misses);
@@ -404,6 +406,19 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   response->set_resident_bricks(cache.resident_bricks);
   response->set_cache_budget_bytes(engine_.cache().budget_bytes());
   response->set_eviction_policy(engine_.cache().policy().name());
+  response->set_proxy_bytes(engine_.proxies() != nullptr ? engine_.proxies()->memory_bytes() : 0);
+  if (const SubtreeTier* tier = engine_.cache().subtree_tier()) {
+    const SubtreeTierCounters& t = cache.subtree;
+    response->set_subtree_dir(tier->options().directory);
+    response->set_subtree_loads(t.loads);
+    response->set_subtree_writes(t.writes);
+    response->set_subtree_rejects(t.rejected());
+    response->set_subtree_bytes_read(t.bytes_read);
+    response->set_subtree_bytes_written(t.bytes_written);
+    response->set_subtree_load_seconds(t.load_seconds);
+    response->set_subtree_files(t.files);
+    response->set_subtree_file_bytes(t.bytes);
+  }
   return grpc::Status::OK;
 }
 
@@ -415,6 +430,10 @@ ServiceCounters SceneQueryService::counters() const {
   c.rays_hit = rays_hit_.load(std::memory_order_relaxed);
   c.invalid_rays = invalid_rays_.load(std::memory_order_relaxed);
   c.seconds_tracing = static_cast<double>(nanoseconds_tracing_.load(std::memory_order_relaxed)) * 1e-9;
+  c.brick_visits = brick_visits_.load(std::memory_order_relaxed);
+  c.proxy_tests = proxy_tests_.load(std::memory_order_relaxed);
+  c.bricks_skipped_by_proxy = bricks_skipped_by_proxy_.load(std::memory_order_relaxed);
+  c.rays_traced_ahead = rays_traced_ahead_.load(std::memory_order_relaxed);
   return c;
 }
 

@@ -66,6 +66,11 @@ struct ServiceCounters {
   uint64_t rays_hit = 0;
   uint64_t invalid_rays = 0;
   double seconds_tracing = 0;
+  // Summed over the requests answered (QueryStats).
+  uint64_t brick_visits = 0;
+  uint64_t proxy_tests = 0;
+  uint64_t bricks_skipped_by_proxy = 0;
+  uint64_t rays_traced_ahead = 0;
 };
 
 class SceneQueryService final : public v1::SceneQuery::Service {
@@ -129,6 +134,10 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   std::atomic<uint64_t> rays_hit_{0};
   std::atomic<uint64_t> invalid_rays_{0};
   std::atomic<uint64_t> nanoseconds_tracing_{0};
+  std::atomic<uint64_t> brick_visits_{0};
+  std::atomic<uint64_t> proxy_tests_{0};
+  std::atomic<uint64_t> bricks_skipped_by_proxy_{0};
+  std::atomic<uint64_t> rays_traced_ahead_{0};
 };
 
 }  // namespace outcore::server

@@ -6,7 +6,11 @@
 // layout, NaN rays under strict, oversize messages and replies) are
 // INVALID_ARGUMENT / RESOURCE_EXHAUSTED naming the field or ray, and the server
 // answers a good request after each; a client cancelling mid-stream costs
-// nothing; SIGTERM and SIGINT drain an in-flight stream and exit 0.
+// nothing; SIGTERM and SIGINT drain an in-flight stream and exit 0. Stats: a
+// request's figures (proxy tests and skips, upper nodes, visits, cache) equal
+// `outcore trace --stats-json` for the same rays on a fresh cache, GetStats
+// sums them (streams included), and with --subtree-dir it reports the tier's
+// loads and writes (none without).
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 #include <signal.h>
@@ -18,14 +22,18 @@
 #include <set>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "client/cpp/scene_client.h"
+#include "core/io/npy.h"
 #include "core/query/query_engine.h"
 #include "core/store/scene_store.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "grpc/reflection/v1alpha/reflection.grpc.pb.h"
 #include "outcore/v1/scene_query.grpc.pb.h"
+#include "proto/outcore/v1/query_stats_fields.h"
+#include "tests/support/json_fields.h"
 #include "tests/support/server_process.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/test_paths.h"
@@ -35,6 +43,7 @@ namespace outcore {
 namespace {
 
 using testing::contains;
+using testing::json_uint;
 using testing::ServerProcess;
 using testing::SubprocessResult;
 using testing::TempDir;
@@ -129,6 +138,15 @@ class ServerApi : public ::testing::Test {
     return stub_->Intersect(&context, request, response ? response : &local);
   }
 
+  static v1::ServerStats server_stats(v1::SceneQuery::Stub& stub) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    v1::ServerStats stats;
+    const grpc::Status status = stub.GetStats(&context, v1::GetStatsRequest(), &stats);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return stats;
+  }
+
   // A good request is answered right (the server is still serving).
   void expect_serving() {
     const std::vector<Ray> r = rays(500, 99);
@@ -219,6 +237,7 @@ TEST_F(ServerApi, ClientLibraryStreamsBigBatchesAndReportsStats) {
   const std::vector<Ray> r = rays(90'000, 5);
   std::vector<Hit> hits(r.size());
   client::CallStats stats;
+  const v1::ServerStats before = server_stats(*stub_);
   ASSERT_TRUE((*client)->intersect(r, hits, {}, &stats).ok());
   EXPECT_TRUE(hit_bytes(hits) == hit_bytes(serial_hits(r)));
   EXPECT_EQ(stats.messages, 3u);
@@ -237,6 +256,160 @@ TEST_F(ServerApi, ClientLibraryStreamsBigBatchesAndReportsStats) {
   EXPECT_GT(server_stats->cache_hits() + server_stats->cache_misses(), 0u);
   EXPECT_EQ(server_stats->cache_budget_bytes(), uint64_t{1024} << 20);
   EXPECT_EQ(server_stats->eviction_policy(), "lru");
+  // The engine's figures summed over the replies are what the server added up.
+  EXPECT_GT(stats.engine.upper_nodes_visited(), 0u);
+  EXPECT_EQ(server_stats->brick_visits() - before.brick_visits(), stats.engine.brick_visits());
+  EXPECT_EQ(server_stats->proxy_tests() - before.proxy_tests(), stats.engine.proxy_tests());
+  EXPECT_EQ(server_stats->bricks_skipped_by_proxy() - before.bricks_skipped_by_proxy(),
+            stats.engine.bricks_skipped_by_proxy());
+  EXPECT_EQ(server_stats->rays_traced_ahead() - before.rays_traced_ahead(), stats.engine.rays_traced_ahead());
+  EXPECT_EQ(server_stats->proxy_bytes(), engine_->proxies()->memory_bytes());
+  // No subtree tier on this server: no directory, every tier figure 0.
+  EXPECT_EQ(server_stats->subtree_dir(), "");
+  EXPECT_EQ(server_stats->subtree_loads() + server_stats->subtree_writes() + server_stats->subtree_rejects() +
+                server_stats->subtree_bytes_read() + server_stats->subtree_bytes_written() +
+                server_stats->subtree_files() + server_stats->subtree_file_bytes(),
+            0u);
+  EXPECT_EQ(server_stats->subtree_load_seconds(), 0.0);
+  EXPECT_EQ(stats.engine.subtree_loads() + stats.engine.subtree_writes() + stats.engine.subtree_rejects(),
+            0u);
+}
+
+// The wire's QueryStats and the list the server and client convert it with
+// (proto/outcore/v1/query_stats_fields.h) name the same fields.
+TEST(WireQueryStats, TheConversionListNamesEveryFieldOfTheMessage) {
+  std::vector<std::string> listed;
+#define OUTCORE_LIST_WIRE_FIELD(name) listed.push_back(#name);
+  OUTCORE_WIRE_QUERY_STATS(OUTCORE_LIST_WIRE_FIELD)
+#undef OUTCORE_LIST_WIRE_FIELD
+  const google::protobuf::Descriptor* message = v1::QueryStats::descriptor();
+  ASSERT_EQ(listed.size(), static_cast<std::size_t>(message->field_count()));
+  for (int i = 0; i < message->field_count(); ++i) {
+    EXPECT_EQ(listed[i], message->field(i)->name()) << "field " << i << " of outcore.v1.QueryStats";
+  }
+}
+
+// The strongest check of the per-request figures: the same rays on the same
+// store with a fresh cache, once through a fresh server and once through
+// `outcore trace`, give the same counts. Both run one engine thread: how a
+// batch's candidates split into visits and proxy skips can change with the
+// thread count (their sum cannot, nor can any answer).
+TEST_F(ServerApi, PerRequestFiguresEqualTracesForTheSameRaysOnAFreshCache) {
+  std::string error;
+  auto fresh = ServerProcess::start(store_, {"--threads", "1"}, error);
+  ASSERT_NE(fresh, nullptr) << error;
+  const std::vector<Ray> r = rays(3000, 60);
+  const std::string rays_path = dir_->file("fresh-rays.npy");
+  ASSERT_TRUE(write_rays_npy(rays_path, r).ok());
+  const std::string json_path = dir_->file("fresh-trace.json");
+  const SubprocessResult traced =
+      testing::run_outcore({"trace", store_, "--rays", rays_path, "-o", dir_->file("fresh-hits.npy"),
+                            "--threads", "1", "--stats-json", json_path},
+                           std::chrono::milliseconds(120'000));
+  ASSERT_TRUE(traced.succeeded()) << traced.describe();
+  const std::string json = testing::read_file_bytes(json_path);
+
+  auto stub =
+      v1::SceneQuery::NewStub(grpc::CreateChannel(fresh->address(), grpc::InsecureChannelCredentials()));
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  v1::IntersectResponse response;
+  const grpc::Status status = stub->Intersect(&context, make_request(r), &response);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  const v1::QueryStats& s = response.stats();
+  EXPECT_GT(s.proxy_tests(), 0u);
+  EXPECT_GT(s.bricks_skipped_by_proxy(), 0u) << "the proxies skip nothing on these rays";
+  const std::pair<const char*, uint64_t> figures[] = {
+      {"rays", s.rays()},
+      {"invalid_rays", s.invalid_rays()},
+      {"rays_hit", s.rays_hit()},
+      {"upper_nodes_visited", s.upper_nodes_visited()},
+      {"brick_visits", s.brick_visits()},
+      {"proxy_tests", s.proxy_tests()},
+      {"bricks_skipped_by_proxy", s.bricks_skipped_by_proxy()},
+      {"rays_traced_ahead", s.rays_traced_ahead()},
+      {"brick_acquisitions", s.brick_acquisitions()},
+      {"cache_hits", s.cache_hits()},
+      {"cache_misses", s.cache_misses()},
+      {"brick_builds", s.brick_builds()},
+      {"evictions", s.evictions()},
+      {"subtree_loads", s.subtree_loads()},
+      {"subtree_writes", s.subtree_writes()},
+  };
+  for (const auto& [key, value] : figures)
+    EXPECT_EQ(value, json_uint(json, key)) << key << "; trace: " << json;
+  EXPECT_GT(s.seconds_total(), 0.0);
+  EXPECT_GE(s.seconds_total(), s.seconds_upper());
+  EXPECT_GE(s.seconds_brick_builds(), 0.0);
+
+  // The only request this server answered: its figures are the server's.
+  const v1::ServerStats totals = server_stats(*stub);
+  EXPECT_EQ(totals.brick_visits(), s.brick_visits());
+  EXPECT_EQ(totals.proxy_tests(), s.proxy_tests());
+  EXPECT_EQ(totals.bricks_skipped_by_proxy(), s.bricks_skipped_by_proxy());
+  EXPECT_EQ(totals.rays_traced_ahead(), s.rays_traced_ahead());
+  EXPECT_EQ(totals.proxy_bytes(), json_uint(json, "proxy_bytes"));
+  EXPECT_EQ(fresh->stop(SIGTERM), 0) << fresh->log();
+}
+
+// With --subtree-dir a server saves the bricks it builds and, once its budget
+// has evicted them, loads them back instead of building; GetStats and the
+// replies report both.
+TEST_F(ServerApi, SubtreeTierLoadsAndWritesReachGetStatsAndTheReplies) {
+  // Bigger bricks than the suite's store: 28 of about 1,000 triangles, 2.2 MiB
+  // as bvh, so a 1 MiB budget evicts and the second batch loads from the tier.
+  TempDir local;
+  const std::string store = local.file("scene");
+  const SubprocessResult packed = testing::run_outcore({"pack", "gen:sphere?level=5", "gen:torus?cx=3", "-o",
+                                                        store, "--brick-tris", "1000", "-q", "--no-sync"},
+                                                       std::chrono::milliseconds(120'000));
+  ASSERT_TRUE(packed.succeeded()) << packed.describe();
+  auto opened = SceneStore::open(store);
+  ASSERT_TRUE(opened.ok()) << opened.status().to_string();
+  const uint32_t brick_count = (*opened)->brick_count();
+  const std::string tier = local.file("subtrees");
+  std::string error;
+  auto server = ServerProcess::start(
+      store, {"--brick-accel", "bvh", "--cache-mb", "1", "--subtree-dir", tier, "--threads", "1"}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto client = client::SceneClient::connect(server->address());
+  ASSERT_TRUE(client.ok()) << client.status().to_string();
+  const std::vector<Ray> r = testing::make_test_rays((*opened)->manifest().bounds, 3000, 61);
+  std::vector<Hit> first(r.size());
+  std::vector<Hit> second(r.size());
+  client::CallStats a;
+  client::CallStats b;
+  ASSERT_TRUE((*client)->intersect(r, first, {}, &a).ok());
+  ASSERT_TRUE((*client)->intersect(r, second, {}, &b).ok());
+  EXPECT_TRUE(hit_bytes(first) == hit_bytes(second));
+  EXPECT_GT(a.engine.subtree_writes(), 0u);
+  EXPECT_GT(b.engine.subtree_loads(), 0u) << "the second batch built again instead of loading";
+
+  auto stats = (*client)->stats();
+  ASSERT_TRUE(stats.ok()) << stats.status().to_string();
+  EXPECT_EQ(stats->subtree_dir(), tier);
+  EXPECT_GT(stats->evictions(), 0u) << "the budget held the scene: nothing to reload";
+  EXPECT_GT(stats->subtree_writes(), 0u);
+  EXPECT_EQ(stats->subtree_writes(), stats->brick_builds()) << "each brick built is written once";
+  EXPECT_LE(stats->subtree_writes(), brick_count);
+  EXPECT_GT(stats->subtree_loads(), 0u);
+  EXPECT_EQ(stats->subtree_rejects(), 0u);
+  EXPECT_GT(stats->subtree_bytes_written(), 0u);
+  EXPECT_GT(stats->subtree_bytes_read(), 0u);
+  EXPECT_GE(stats->subtree_load_seconds(), 0.0);
+  EXPECT_EQ(stats->subtree_files(), stats->subtree_writes());
+  EXPECT_EQ(stats->subtree_file_bytes(), stats->subtree_bytes_written());
+  // The replies' figures add up to the server's (nothing else ran on it).
+  EXPECT_EQ(a.engine.subtree_loads() + b.engine.subtree_loads(), stats->subtree_loads());
+  EXPECT_EQ(a.engine.subtree_writes() + b.engine.subtree_writes(), stats->subtree_writes());
+  EXPECT_EQ(a.engine.subtree_bytes_read() + b.engine.subtree_bytes_read(), stats->subtree_bytes_read());
+  EXPECT_EQ(a.engine.subtree_bytes_written() + b.engine.subtree_bytes_written(),
+            stats->subtree_bytes_written());
+  EXPECT_EQ(a.engine.brick_builds() + b.engine.brick_builds(), stats->brick_builds());
+  // And they print as `outcore trace --stats` prints them.
+  const std::string text = client::to_query_stats(b.engine).to_text();
+  EXPECT_TRUE(contains(text, "subtree tier: " + std::to_string(b.engine.subtree_loads()) + " loads")) << text;
+  EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
 }
 
 TEST_F(ServerApi, SceneInfoDescribesTheStore) {
@@ -461,6 +634,7 @@ TEST_F(ServerApi, ChunksQueuedWhileTheEngineIsBusyAreTracedTogetherWithOneReplyE
   // A big first chunk keeps the engine busy while the small ones queue up
   // behind it; one chunk in the middle is strict (never grouped with the
   // others). Every reply must still be its chunk's serial answer, in order.
+  const v1::ServerStats before = server_stats(*stub_);
   grpc::ClientContext context;
   auto stream = stub_->IntersectStream(&context);
   std::vector<std::vector<Ray>> chunks;
@@ -475,6 +649,7 @@ TEST_F(ServerApi, ChunksQueuedWhileTheEngineIsBusyAreTracedTogetherWithOneReplyE
   v1::IntersectResponse response;
   uint64_t rays_hit = 0;
   uint64_t want_hit = 0;
+  v1::QueryStats sums;
   for (uint64_t c = 0; c < kChunks; ++c) {
     ASSERT_TRUE(stream->Read(&response)) << "reply " << c;
     EXPECT_EQ(response.sequence(), c);
@@ -484,10 +659,22 @@ TEST_F(ServerApi, ChunksQueuedWhileTheEngineIsBusyAreTracedTogetherWithOneReplyE
     EXPECT_TRUE(response.hits() == hit_bytes(want)) << "chunk " << c;
     rays_hit += response.stats().rays_hit();
     for (const Hit& hit : want) want_hit += std::isfinite(hit.t) ? 1 : 0;
+    const v1::QueryStats& s = response.stats();
+    sums.set_brick_visits(sums.brick_visits() + s.brick_visits());
+    sums.set_proxy_tests(sums.proxy_tests() + s.proxy_tests());
+    sums.set_bricks_skipped_by_proxy(sums.bricks_skipped_by_proxy() + s.bricks_skipped_by_proxy());
+    sums.set_upper_nodes_visited(sums.upper_nodes_visited() + s.upper_nodes_visited());
   }
   EXPECT_EQ(rays_hit, want_hit) << "the replies' figures must add up to the stream's";
   EXPECT_FALSE(stream->Read(&response));
   EXPECT_TRUE(stream->Finish().ok());
+  // Also the new figures: each engine call's are in one reply only.
+  const v1::ServerStats after = server_stats(*stub_);
+  EXPECT_GT(sums.upper_nodes_visited(), 0u);
+  EXPECT_EQ(after.brick_visits() - before.brick_visits(), sums.brick_visits());
+  EXPECT_EQ(after.proxy_tests() - before.proxy_tests(), sums.proxy_tests());
+  EXPECT_EQ(after.bricks_skipped_by_proxy() - before.bricks_skipped_by_proxy(),
+            sums.bricks_skipped_by_proxy());
   // The server's debug line for the stream: fewer engine calls than chunks.
   const int engine_calls = last_stream_engine_calls(server_->log(), "IntersectStream: 12 chunks");
   EXPECT_GE(engine_calls, 3) << "the strict chunk is traced on its own";

@@ -2,13 +2,17 @@
 // loopback port: the hits (and any-hit bools) files are bitwise the files
 // `outcore trace` writes on the same store, for unary batches and for batches
 // several times the server's max message size (streamed in chunks), on a
-// generated scene and on the Stanford bunny; bad query arguments and an
-// unreachable server are errors that name what is wrong.
+// generated scene and on the Stanford bunny; `query --stats` prints the
+// engine's figures as `trace --stats` does, the same ones for the same rays;
+// bad query arguments and an unreachable server are errors that name what is
+// wrong.
 #include <gtest/gtest.h>
+#include <signal.h>
 
 #include <chrono>
 #include <fstream>
 #include <memory>
+#include <regex>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -186,6 +190,41 @@ TEST_F(ServerE2e, BunnyUnaryAndStreamedEqualTrace) {
   const std::string out = expect_query_equals_trace(*bunny_, bunny_->big_rays, false);
   EXPECT_TRUE(contains(out, "messages 4\n")) << out;
   expect_query_equals_trace(*bunny_, bunny_->big_rays, true);
+}
+
+// The line of `outcore trace --stats`-style text that starts with `prefix`,
+// its seconds blanked (empty when there is none).
+std::string figures_line(const std::string& text, const std::string& prefix) {
+  const auto start = text.find("\n" + prefix);
+  if (start == std::string::npos) return "";
+  const auto end = text.find('\n', start + 1);
+  const std::string line = text.substr(start + 1, end == std::string::npos ? end : end - start - 1);
+  return std::regex_replace(line, std::regex("[0-9]+\\.[0-9]+ s\\b"), "_ s");
+}
+
+// On a fresh server and a fresh `trace`, one engine thread each (the split of
+// candidates into visits and proxy skips can change with the thread count),
+// the same rays give the same figures, printed the same way.
+TEST_F(ServerE2e, QueryStatsPrintTheFiguresTracePrintsForTheSameRays) {
+  std::string error;
+  auto server = ServerProcess::start(gen_->store, {"--threads", "1"}, error);
+  ASSERT_NE(server, nullptr) << error;
+  const SubprocessResult q = outcore({"query", "--server", server->address(), "--rays", gen_->small_rays,
+                                      "-o", dir_->file("figures-query.npy"), "--stats"});
+  ASSERT_TRUE(q.succeeded()) << q.describe();
+  const SubprocessResult t = outcore({"trace", gen_->store, "--rays", gen_->small_rays, "-o",
+                                      dir_->file("figures-trace.npy"), "--stats", "--threads", "1"});
+  ASSERT_TRUE(t.succeeded()) << t.describe();
+  EXPECT_TRUE(contains(q.stdout_text, "messages 1\n")) << q.stdout_text;
+  for (const std::string prefix : {"  upper: ", "  bricks: ", "  proxies: "}) {
+    const std::string want = figures_line(t.stdout_text, prefix);
+    EXPECT_FALSE(want.empty()) << "no '" << prefix << "' line in trace's:\n" << t.stdout_text;
+    EXPECT_EQ(figures_line(q.stdout_text, prefix), want) << q.stdout_text;
+  }
+  EXPECT_TRUE(
+      std::regex_search(q.stdout_text, std::regex("proxies: [1-9][0-9]* of [0-9]+ brick visits skipped")))
+      << q.stdout_text;
+  EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
 }
 
 TEST_F(ServerE2e, QueryErrorsNameWhatIsWrong) {

@@ -25,6 +25,7 @@
 #include "core/io/npy.h"
 #include "core/query/query_engine.h"
 #include "core/store/scene_store.h"
+#include "tests/support/json_fields.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/test_paths.h"
 #include "tests/support/test_rays.h"
@@ -34,6 +35,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using testing::contains;
+using testing::json_uint;
 using testing::outcore_binary;
 using testing::run_subprocess;
 using testing::SubprocessOptions;
@@ -163,32 +165,6 @@ class JsonChecker {
 
 bool valid_json(const std::string& text) {
   return JsonChecker(text).valid();
-}
-
-// The unsigned integer after the `occurrence`-th "key": in `json`.
-uint64_t json_uint(const std::string& json, const std::string& key, int occurrence = 0) {
-  const std::string quoted = "\"" + key + "\"";
-  std::size_t pos = std::string::npos;
-  for (int k = 0, from = 0; k <= occurrence; ++k) {
-    pos = json.find(quoted, from);
-    if (pos == std::string::npos) {
-      ADD_FAILURE() << "no " << quoted << " (#" << occurrence << ") in " << json;
-      return 0;
-    }
-    from = static_cast<int>(pos + quoted.size());
-  }
-  pos = json.find(':', pos + quoted.size());
-  if (pos == std::string::npos) {
-    ADD_FAILURE() << "no value for " << quoted;
-    return 0;
-  }
-  ++pos;
-  while (pos < json.size() && json[pos] == ' ') ++pos;
-  if (pos >= json.size() || !std::isdigit(static_cast<unsigned char>(json[pos]))) {
-    ADD_FAILURE() << quoted << " is not an unsigned integer in " << json;
-    return 0;
-  }
-  return std::strtoull(json.c_str() + pos, nullptr, 10);
 }
 
 std::size_t count_of(const std::string& text, const std::string& part) {

@@ -11,6 +11,7 @@
 #include "client/cpp/scene_client.h"
 #include "core/cli/commands.h"
 #include "core/io/npy.h"
+#include "core/query/query_engine.h"
 
 namespace outcore {
 
@@ -67,15 +68,16 @@ int run_query(const QueryArgs& args) {
   if (!status.ok()) return report_command_error("query", status.message());
   if (!written.ok()) return report_command_error("query", written.message());
   if (args.print_stats) {
-    const v1::QueryStats& s = stats.engine;
-    std::printf(
-        "messages %llu\nrays %llu\nrays_hit %llu\ninvalid_rays %llu\nbrick_visits %llu\ncache_hits %llu\n"
-        "cache_misses %llu\nbrick_builds %llu\nevictions %llu\nseconds_engine %.6f\n",
-        static_cast<unsigned long long>(stats.messages), static_cast<unsigned long long>(s.rays()),
-        static_cast<unsigned long long>(s.rays_hit()), static_cast<unsigned long long>(s.invalid_rays()),
-        static_cast<unsigned long long>(s.brick_visits()), static_cast<unsigned long long>(s.cache_hits()),
-        static_cast<unsigned long long>(s.cache_misses()), static_cast<unsigned long long>(s.brick_builds()),
-        static_cast<unsigned long long>(s.evictions()), s.seconds_total());
+    // Printed as `outcore trace --stats` does; the cache's peak and budget
+    // and the proxies' size are server-wide, so they come from GetStats.
+    auto server = scene.stats(args.deadline_seconds);
+    if (!server.ok()) return report_command_error("query", server.status().message());
+    QueryStats s = client::to_query_stats(stats.engine);
+    s.peak_bytes_resident = server->peak_resident_bytes();
+    s.cache_budget_bytes = server->cache_budget_bytes();
+    s.proxy_bytes = server->proxy_bytes();
+    std::printf("messages %llu\n", static_cast<unsigned long long>(stats.messages));
+    std::fputs(s.to_text().c_str(), stdout);
   }
   return 0;
 }
@@ -97,7 +99,8 @@ void add_query_command(CLI::App& app, int& exit_code) {
       "--chunk-rays", args->chunk_rays,
       "Rays per message (default: as many as the server's max message size allows); larger batches "
       "are streamed");
-  cmd->add_flag("--stats", args->print_stats, "Print the engine's figures summed over the replies");
+  cmd->add_flag("--stats", args->print_stats,
+                "Print the engine's figures summed over the replies (as trace --stats)");
   cmd->add_option("--repeat", args->repeat,
                   "Send the batch this many times, printing each call's wall seconds")
       ->check(CLI::Range(1, 1000000))

@@ -8,6 +8,8 @@
 #include <cstring>
 #include <thread>
 
+#include "proto/outcore/v1/query_stats_fields.h"
+
 namespace outcore::client {
 
 static_assert(std::endian::native == std::endian::little, "the wire layouts are little-endian");
@@ -96,17 +98,9 @@ void add_stats(const v1::QueryStats& from, CallStats* to) {
   if (to == nullptr) return;
   ++to->messages;
   v1::QueryStats& s = to->engine;
-  s.set_rays(s.rays() + from.rays());
-  s.set_invalid_rays(s.invalid_rays() + from.invalid_rays());
-  s.set_rays_hit(s.rays_hit() + from.rays_hit());
-  s.set_brick_visits(s.brick_visits() + from.brick_visits());
-  s.set_brick_acquisitions(s.brick_acquisitions() + from.brick_acquisitions());
-  s.set_cache_hits(s.cache_hits() + from.cache_hits());
-  s.set_cache_misses(s.cache_misses() + from.cache_misses());
-  s.set_brick_builds(s.brick_builds() + from.brick_builds());
-  s.set_evictions(s.evictions() + from.evictions());
-  s.set_seconds_total(s.seconds_total() + from.seconds_total());
-  s.set_seconds_build(s.seconds_build() + from.seconds_build());
+#define OUTCORE_ADD_WIRE_FIELD(name) s.set_##name(s.name() + from.name());
+  OUTCORE_WIRE_QUERY_STATS(OUTCORE_ADD_WIRE_FIELD)
+#undef OUTCORE_ADD_WIRE_FIELD
 }
 
 // A reply must answer exactly the rays its request sent.
@@ -125,6 +119,14 @@ Status check_reply(const Response& response, uint64_t rays, uint32_t bytes_per_r
 }
 
 }  // namespace
+
+QueryStats to_query_stats(const v1::QueryStats& wire) {
+  QueryStats stats;
+#define OUTCORE_GET_WIRE_FIELD(name) stats.name = wire.name();
+  OUTCORE_WIRE_QUERY_STATS(OUTCORE_GET_WIRE_FIELD)
+#undef OUTCORE_GET_WIRE_FIELD
+  return stats;
+}
 
 Status from_grpc_status(const grpc::Status& status, const std::string& context) {
   if (status.ok()) return Status::Ok();

@@ -18,6 +18,7 @@
 #include <span>
 #include <string>
 
+#include "core/query/query_engine.h"
 #include "core/query/ray_types.h"
 #include "core/util/status.h"
 #include "outcore/v1/scene_query.grpc.pb.h"
@@ -83,6 +84,11 @@ class SceneClient {
   v1::SceneInfo scene_;
   uint64_t max_chunk_rays_ = 0;
 };
+
+// The engine's figures from the wire's (a reply's, or CallStats::engine).
+// Those the wire does not carry per request stay 0: peak_bytes_resident,
+// cache_budget_bytes and proxy_bytes (ServerStats has them).
+QueryStats to_query_stats(const v1::QueryStats& wire);
 
 // The one conversion of a gRPC status into the client's Status.
 Status from_grpc_status(const grpc::Status& status, const std::string& context);

@@ -8,6 +8,7 @@ the repository ($OUTCORE_MODELS_DIR overrides).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import signal
@@ -104,9 +105,19 @@ def make_rays(bounds, n: int, seed: int, columns: int = 6) -> np.ndarray:
     return np.ascontiguousarray(rays, dtype=np.float32)
 
 
-def trace(store: Path, rays: np.ndarray, tmp_path: Path, any_hit: bool = False) -> np.ndarray:
-    """The reference: `outcore trace` in-process on the same store."""
+def trace(store: Path, rays: np.ndarray, tmp_path: Path, any_hit: bool = False, *extra) -> np.ndarray:
+    """The reference: `outcore trace` in-process on the same store (extra:
+    more of its options)."""
     rays_path, out_path = tmp_path / "rays.npy", tmp_path / "hits.npy"
     np.save(rays_path, rays)
-    run_outcore("trace", store, "--rays", rays_path, "-o", out_path, *(["--any-hit"] if any_hit else []))
+    run_outcore("trace", store, "--rays", rays_path, "-o", out_path, *(["--any-hit"] if any_hit else []),
+                *extra)
     return np.load(out_path)
+
+
+def trace_stats(store: Path, rays: np.ndarray, tmp_path: Path, *extra) -> dict:
+    """The engine's figures (`outcore trace --stats-json`) for closest hits of
+    `rays` on the store, with a fresh cache."""
+    stats_path = tmp_path / "trace-stats.json"
+    trace(store, rays, tmp_path, False, "--stats-json", stats_path, *extra)
+    return json.loads(stats_path.read_text())

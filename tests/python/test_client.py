@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import outcore
-from support import SPHERE, Server, make_rays, trace
+from support import SPHERE, Server, make_rays, trace, trace_stats
 
 HIT_KEYS = ("t_hit", "geometry_ids", "primitive_ids", "primitive_uvs", "primitive_normals")
 
@@ -250,6 +250,92 @@ def test_stats_count_the_rays_answered(client, bounds):
     assert after["cache_hits"] + after["cache_misses"] >= before["cache_hits"] + before["cache_misses"]
     assert after["resident_bytes"] <= after["cache_budget_bytes"]
     assert after["eviction_policy"]
+    # The per-request sums grow by this request's figures.
+    for key in ("brick_visits", "proxy_tests", "bricks_skipped_by_proxy", "rays_traced_ahead"):
+        assert after[key] - before[key] == client.last_stats[key], key
+    assert after["proxy_bytes"] > 0  # proxies are on by default
+    # No subtree tier on this server.
+    assert after["subtree_dir"] == ""
+    for key in SUBTREE_COUNTS:
+        assert after[key] == 0, key
+    assert after["subtree_load_seconds"] == 0
+
+
+SUBTREE_COUNTS = ("subtree_loads", "subtree_writes", "subtree_rejects", "subtree_bytes_read",
+                  "subtree_bytes_written", "subtree_files", "subtree_file_bytes")
+# What the engine counts per request (beyond rays and cache counters), in
+# last_stats as in `outcore trace --stats-json`.
+ENGINE_COUNTS = ("rays", "rays_hit", "invalid_rays", "upper_nodes_visited", "brick_visits", "proxy_tests",
+                 "bricks_skipped_by_proxy", "rays_traced_ahead", "brick_acquisitions", "cache_hits",
+                 "cache_misses", "brick_builds", "evictions", "subtree_loads", "subtree_writes")
+
+
+def test_last_stats_equal_traces_for_the_same_rays_on_a_fresh_cache(store, bounds, tmp_path):
+    # One engine thread each: the split of candidates into visits and proxy
+    # skips can change with the thread count (their sum and the answers cannot).
+    rays = make_rays(bounds, 3000, seed=71)
+    server = Server(store, "--threads", 1)
+    try:
+        with outcore.SceneClient(server.address, timeout=60) as client:
+            client.cast_rays(rays)
+            got = client.last_stats
+            totals = client.stats()
+    finally:
+        assert server.stop() == 0
+    want = trace_stats(store, rays, tmp_path, "--threads", 1)
+    assert {key: got[key] for key in ENGINE_COUNTS} == {key: want[key] for key in ENGINE_COUNTS}
+    assert got["bricks_skipped_by_proxy"] > 0 and got["proxy_tests"] >= got["bricks_skipped_by_proxy"]
+    assert 0 < got["seconds_upper"] <= got["seconds_total"]
+    assert totals["proxy_bytes"] == want["proxy_bytes"]
+    for key in ("brick_visits", "proxy_tests", "bricks_skipped_by_proxy", "rays_traced_ahead"):
+        assert totals[key] == got[key], key
+
+
+def test_streamed_last_stats_add_up_to_the_servers(small_server, bounds):
+    # Chunks the server traced together carry the call's figures in the last
+    # reply only, so the client's sums over the replies are exact.
+    rays = make_rays(bounds, 100_000, seed=72)
+    with outcore.SceneClient(small_server.address, timeout=60) as client:
+        before = client.stats()
+        client.cast_rays(rays)
+        after = client.stats()
+        stats = client.last_stats
+    assert stats["rays"] == len(rays)
+    assert after["requests"] - before["requests"] > 1, "the batch should have been streamed"
+    for key in ("rays", "brick_visits", "proxy_tests", "bricks_skipped_by_proxy", "rays_traced_ahead"):
+        assert after[key] - before[key] == stats[key], key
+
+
+def test_subtree_tier_loads_and_writes_are_in_stats(store, bounds, tmp_path):
+    # bvh bricks of ~4k triangles are ~0.5 MiB each, the store's several MiB:
+    # a 2 MiB budget evicts, and the second batch loads from the tier.
+    tier = tmp_path / "subtrees"
+    rays = make_rays(bounds, 3000, seed=73)
+    server = Server(store, "--brick-accel", "bvh", "--cache-mb", 2, "--subtree-dir", tier)
+    try:
+        with outcore.SceneClient(server.address, timeout=60) as client:
+            first = client.cast_rays(rays)
+            first_stats = client.last_stats
+            second = client.cast_rays(rays)
+            second_stats = client.last_stats
+            stats = client.stats()
+            info = client.scene_info()
+    finally:
+        assert server.stop() == 0
+    assert np.array_equal(first["t_hit"], second["t_hit"], equal_nan=True)
+    assert stats["subtree_dir"] == str(tier)
+    assert stats["evictions"] > 0, "the budget held the scene: nothing to reload"
+    assert 0 < stats["subtree_writes"] == stats["brick_builds"] <= info["brick_count"]
+    assert stats["subtree_loads"] > 0
+    assert stats["subtree_rejects"] == 0
+    assert stats["subtree_bytes_written"] > 0 and stats["subtree_bytes_read"] > 0
+    assert stats["subtree_load_seconds"] >= 0
+    assert stats["subtree_files"] == stats["subtree_writes"]
+    assert stats["subtree_file_bytes"] == stats["subtree_bytes_written"]
+    assert len(list(tier.glob("*.subtree"))) == stats["subtree_files"]
+    for key in ("subtree_loads", "subtree_writes", "subtree_bytes_read", "subtree_bytes_written"):
+        assert first_stats[key] + second_stats[key] == stats[key], key
+    assert second_stats["subtree_loads"] > 0
 
 
 @pytest.mark.parametrize("chunk_rays", [200_000, 20_000], ids=["unary", "streamed"])

@@ -131,8 +131,12 @@ class SceneClient:
             request_serializer=pb.GetStatsRequest.SerializeToString,
             response_deserializer=pb.ServerStats.FromString,
         )
-        #: The engine's figures for the last query (QueryStats fields, summed
-        #: over the chunks of a streamed batch), or None before the first.
+        #: The engine's figures for the last query (QueryStats fields: rays,
+        #: rays_hit, brick_visits, upper_nodes_visited, proxy_tests,
+        #: bricks_skipped_by_proxy, rays_traced_ahead, cache_hits,
+        #: cache_misses, brick_builds, subtree_loads, subtree_writes,
+        #: seconds_total, seconds_upper, seconds_brick, ...; summed over the
+        #: chunks of a streamed batch), or None before the first.
         self.last_stats: dict | None = None
 
     # -- lifetime ---------------------------------------------------------
@@ -197,9 +201,15 @@ class SceneClient:
 
     def stats(self) -> dict:
         """Server-wide figures since start (GetStats) as a dict: requests,
-        failed_requests, rays, rays_hit, invalid_rays, seconds_tracing and the
+        failed_requests, rays, rays_hit, invalid_rays, seconds_tracing; the
         brick cache's (cache_hits, cache_misses, brick_builds, evictions,
-        resident_bytes, peak_resident_bytes, cache_budget_bytes, ...)."""
+        resident_bytes, peak_resident_bytes, cache_budget_bytes, ...); sums
+        over the requests of brick_visits, proxy_tests,
+        bricks_skipped_by_proxy and rays_traced_ahead; proxy_bytes; and the
+        subtree tier's (subtree_dir, "" without one, subtree_loads,
+        subtree_writes, subtree_rejects, subtree_bytes_read,
+        subtree_bytes_written, subtree_load_seconds, subtree_files,
+        subtree_file_bytes; all 0 without a tier)."""
         return _message_to_dict(self._call_plain(self._get_stats, pb.GetStatsRequest(), "GetStats"))
 
     # -- internals --------------------------------------------------------

@@ -1,0 +1,40 @@
+// The figures outcore.v1.QueryStats (scene_query.proto) carries, each under
+// the name it has in outcore::QueryStats (core/query/query_engine.h), in field
+// order: OUTCORE_WIRE_QUERY_STATS(X) expands X(name) for each. The server
+// fills the wire's figures from the engine's with it
+// (server/scene_query_service.cpp) and the C++ client sums replies and turns
+// them back into the engine's (client/cpp/scene_client.cpp), so a field added
+// to the message and listed here reaches both; a test checks that the list
+// and the message agree (tests/server_api_test.cpp). Every one is a sum.
+//
+// Thread-safety: a macro; no state.
+#pragma once
+
+// clang-format off
+#define OUTCORE_WIRE_QUERY_STATS(X) \
+  X(rays)                           \
+  X(invalid_rays)                   \
+  X(rays_hit)                       \
+  X(brick_visits)                   \
+  X(brick_acquisitions)             \
+  X(cache_hits)                     \
+  X(cache_misses)                   \
+  X(brick_builds)                   \
+  X(evictions)                      \
+  X(seconds_total)                  \
+  X(seconds_build)                  \
+  X(upper_nodes_visited)            \
+  X(rays_traced_ahead)              \
+  X(proxy_tests)                    \
+  X(bricks_skipped_by_proxy)        \
+  X(subtree_loads)                  \
+  X(subtree_writes)                 \
+  X(subtree_rejects)                \
+  X(subtree_bytes_read)             \
+  X(subtree_bytes_written)          \
+  X(seconds_upper)                  \
+  X(seconds_brick)                  \
+  X(seconds_proxy)                  \
+  X(seconds_brick_builds)           \
+  X(seconds_subtree_loads)
+// clang-format on
