@@ -40,14 +40,9 @@ Expected<std::span<const Ray>> decode_ray_batch(const v1::RayBatch& batch, std::
 // the first number is always the ray's index in everything the call sent.
 std::string ray_name(const BatchPosition& position, uint64_t index_in_batch);
 
-// INVALID_ARGUMENT naming the first ray (ray_name) that is invalid
-// (ray_problem; only when `strict`) or out of range, or OK.
-//
-// Out of range: a finite origin or direction component beyond +-1.844e18
-// (Embree's FLT_LARGE). The engine's ray_problem() lets such rays through and
-// Embree then aborts the process on its ray.valid() assertion (Debian builds
-// Embree with asserts), so the server refuses them in every mode until the
-// engine counts them as invalid rays itself.
+// With `strict`, INVALID_ARGUMENT naming the first invalid ray (ray_name,
+// ray_problem) by its place in the call; otherwise OK (the engine answers
+// invalid rays, components beyond Embree's range included, as counted misses).
 Status check_rays(std::span<const Ray> rays, const BatchPosition& position, bool strict);
 
 }  // namespace outcore::server

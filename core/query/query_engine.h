@@ -22,8 +22,8 @@
 // a brick it cannot hit is skipped without being loaded or traced. Proxies
 // are conservative, so answers are bitwise the same with them off.
 //
-// Invalid rays (NaN/Inf components, zero direction, tnear < 0 or not finite,
-// tnear > tfar, NaN tfar) are answered as misses and counted; with strict
+// Invalid rays (NaN/Inf components, components beyond +-1.844e18, zero
+// direction, tnear < 0 or not finite, tnear > tfar, NaN tfar) are answered as misses and counted; with strict
 // they are an INVALID_ARGUMENT naming the first bad ray.
 //
 // Thread-safety: intersect() and occluded() may be called concurrently from

@@ -329,7 +329,7 @@ TEST(QueryEngine, RaysInsideTheSceneEndingEarlyOrStartingLateFollowTheirSegment)
 TEST(QueryEngine, InvalidRaysAreCountedMissesOrAStrictErrorNamingTheFirst) {
   const auto scene = pack({"gen:sphere?level=2"}, 64);
   auto engine = engine_for(*scene);
-  std::vector<Ray> rays(6);
+  std::vector<Ray> rays(8);
   for (auto& r : rays) {
     r.origin = {0, 0, -5};
     r.direction = {0, 0, 1};
@@ -339,12 +339,24 @@ TEST(QueryEngine, InvalidRaysAreCountedMissesOrAStrictErrorNamingTheFirst) {
   rays[3].tnear = 3;
   rays[3].tfar = 2;
   rays[4].direction.y = std::numeric_limits<float>::infinity();
+  // Finite but beyond Embree's range (it would abort on them): aimed at the
+  // sphere, so they would reach a brick.
+  rays[6].origin.z = -3e38f;
+  rays[7].direction.z = 2e19f;
   QueryStats stats;
   const auto hits = intersect(*engine, rays, {}, &stats);
-  EXPECT_EQ(stats.invalid_rays, 4u);
+  EXPECT_EQ(stats.invalid_rays, 6u);
   EXPECT_TRUE(hits[0].is_hit());
   EXPECT_TRUE(hits[5].is_hit());
-  for (int i = 1; i <= 4; ++i) EXPECT_FALSE(hits[i].is_hit()) << i;
+  for (const int i : {1, 2, 3, 4, 6, 7}) EXPECT_FALSE(hits[i].is_hit()) << i;
+  std::vector<uint8_t> occluded(rays.size());
+  ASSERT_TRUE(engine->occluded(rays, occluded, {}).ok());
+  EXPECT_EQ(occluded, (std::vector<uint8_t>{1, 0, 0, 0, 0, 1, 0, 0}));
+  QueryOptions one_by_one;
+  one_by_one.reorder = false;
+  EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, one_by_one), hits));
+  EXPECT_STREQ(ray_problem(rays[6]), "an origin component is beyond +-1.844e18 (the intersector's range)");
+  EXPECT_STREQ(ray_problem(rays[7]), "a direction component is beyond +-1.844e18 (the intersector's range)");
   QueryOptions strict;
   strict.strict = true;
   std::vector<Hit> out(rays.size());

@@ -15,6 +15,11 @@ namespace outcore {
 
 inline constexpr uint32_t kInvalidId = 0xffffffffu;
 
+// The largest |component| of a ray's origin or direction the engine traces:
+// Embree's FLT_LARGE, beyond which rtcIntersect asserts (and a Debian build
+// of Embree aborts the process). Larger finite components make a ray invalid.
+inline constexpr float kLargestRayComponent = 1.844e18f;
+
 struct Ray {
   Vec3f origin;
   Vec3f direction;  // need not be unit length; t is in units of its length
