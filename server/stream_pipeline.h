@@ -78,10 +78,11 @@ struct StreamTimes {
   uint64_t groups = 0;          // engine calls
 };
 
-template <class Response>
+// Stream: what replies are written to (gRPC's server stream; the pipeline
+// only calls its Write, so tests can give it a stream of their own).
+template <class Response, class Stream = grpc::ServerReaderWriter<Response, v1::QueryRequest>>
 class StreamPipeline {
  public:
-  using Stream = grpc::ServerReaderWriter<Response, v1::QueryRequest>;
   using Chunks = std::vector<std::unique_ptr<StreamChunk>>;
   using Replies = std::vector<std::unique_ptr<Response>>;
 
