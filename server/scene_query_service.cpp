@@ -418,6 +418,10 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
     response->set_subtree_load_seconds(t.load_seconds);
     response->set_subtree_files(t.files);
     response->set_subtree_file_bytes(t.bytes);
+    response->set_subtree_write_failures(t.write_failures);
+    response->set_subtree_writes_too_large(t.writes_too_large);
+    response->set_subtree_files_evicted(t.files_evicted);
+    response->set_subtree_write_seconds(t.write_seconds);
   }
   return grpc::Status::OK;
 }

@@ -399,6 +399,10 @@ TEST_F(ServerApi, SubtreeTierLoadsAndWritesReachGetStatsAndTheReplies) {
   EXPECT_GE(stats->subtree_load_seconds(), 0.0);
   EXPECT_EQ(stats->subtree_files(), stats->subtree_writes());
   EXPECT_EQ(stats->subtree_file_bytes(), stats->subtree_bytes_written());
+  EXPECT_EQ(stats->subtree_write_failures(), 0u);
+  EXPECT_EQ(stats->subtree_writes_too_large(), 0u);
+  EXPECT_EQ(stats->subtree_files_evicted(), 0u) << "an unbounded tier removed files";
+  EXPECT_GT(stats->subtree_write_seconds(), 0.0);
   // The replies' figures add up to the server's (nothing else ran on it).
   EXPECT_EQ(a.engine.subtree_loads() + b.engine.subtree_loads(), stats->subtree_loads());
   EXPECT_EQ(a.engine.subtree_writes() + b.engine.subtree_writes(), stats->subtree_writes());
@@ -410,6 +414,28 @@ TEST_F(ServerApi, SubtreeTierLoadsAndWritesReachGetStatsAndTheReplies) {
   const std::string text = client::to_query_stats(b.engine).to_text();
   EXPECT_TRUE(contains(text, "subtree tier: " + std::to_string(b.engine.subtree_loads()) + " loads")) << text;
   EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
+
+  // A tier bounded below the files written removes files to stay within it.
+  const std::string bounded_tier = local.file("bounded");
+  auto bounded = ServerProcess::start(store,
+                                      {"--brick-accel", "bvh", "--cache-mb", "1", "--subtree-dir",
+                                       bounded_tier, "--subtree-dir-mb", "1", "--threads", "1"},
+                                      error);
+  ASSERT_NE(bounded, nullptr) << error;
+  auto bounded_client = client::SceneClient::connect(bounded->address());
+  ASSERT_TRUE(bounded_client.ok()) << bounded_client.status().to_string();
+  std::vector<Hit> third(r.size());
+  ASSERT_TRUE((*bounded_client)->intersect(r, third, {}).ok());
+  EXPECT_TRUE(hit_bytes(third) == hit_bytes(first));
+  auto bounded_stats = (*bounded_client)->stats();
+  ASSERT_TRUE(bounded_stats.ok()) << bounded_stats.status().to_string();
+  ASSERT_GT(stats->subtree_bytes_written(), uint64_t{1} << 20) << "the files fit 1 MiB: nothing to remove";
+  EXPECT_GT(bounded_stats->subtree_files_evicted(), 0u);
+  EXPECT_LE(bounded_stats->subtree_file_bytes(), uint64_t{1} << 20);
+  EXPECT_EQ(bounded_stats->subtree_files() + bounded_stats->subtree_files_evicted() +
+                bounded_stats->subtree_writes_too_large(),
+            bounded_stats->subtree_writes());
+  EXPECT_EQ(bounded->stop(SIGTERM), 0) << bounded->log();
 }
 
 TEST_F(ServerApi, SceneInfoDescribesTheStore) {

@@ -259,10 +259,12 @@ def test_stats_count_the_rays_answered(client, bounds):
     for key in SUBTREE_COUNTS:
         assert after[key] == 0, key
     assert after["subtree_load_seconds"] == 0
+    assert after["subtree_write_seconds"] == 0
 
 
 SUBTREE_COUNTS = ("subtree_loads", "subtree_writes", "subtree_rejects", "subtree_bytes_read",
-                  "subtree_bytes_written", "subtree_files", "subtree_file_bytes")
+                  "subtree_bytes_written", "subtree_files", "subtree_file_bytes", "subtree_write_failures",
+                  "subtree_writes_too_large", "subtree_files_evicted")
 # What the engine counts per request (beyond rays and cache counters), in
 # last_stats as in `outcore trace --stats-json`.
 ENGINE_COUNTS = ("rays", "rays_hit", "invalid_rays", "upper_nodes_visited", "brick_visits", "proxy_tests",

@@ -209,7 +209,8 @@ class SceneClient:
         subtree tier's (subtree_dir, "" without one, subtree_loads,
         subtree_writes, subtree_rejects, subtree_bytes_read,
         subtree_bytes_written, subtree_load_seconds, subtree_files,
-        subtree_file_bytes; all 0 without a tier)."""
+        subtree_file_bytes, subtree_write_failures, subtree_writes_too_large,
+        subtree_files_evicted, subtree_write_seconds; all 0 without a tier)."""
         return _message_to_dict(self._call_plain(self._get_stats, pb.GetStatsRequest(), "GetStats"))
 
     # -- internals --------------------------------------------------------
