@@ -40,8 +40,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from common import OUTCORE, ROOT, open3d_scene, open3d_timed_cast, prepare_store, read_store_triangles, run  # noqa: E402,F401
-from trace_bench import SCENES  # noqa: E402
+from common import OUTCORE, ROOT, prepare_store, read_store_triangles, run  # noqa: E402
+from trace_bench import SCENES, open3d_cast  # noqa: E402
 
 
 class Server:
@@ -86,10 +86,6 @@ def trace_warm(store, rays_path, out, runs):
     with open(stats_path) as f:
         stats = json.load(f)
     return statistics.median(s["seconds"]["total"] for s in stats[1:])
-
-
-def open3d_time(tris, rays, runs):
-    return open3d_timed_cast(open3d_scene(tris), rays, runs)[0]
 
 
 def latency(client, rays, calls):
@@ -155,7 +151,7 @@ def main():
                         py_times.append(time.perf_counter() - t0)
                     py_s = statistics.median(py_times)
                     trace_s = trace_warm(store, rays_path, trace_out, a.runs)
-                    o3d_s = open3d_time(tris, rays, a.runs)
+                    o3d_s = open3d_cast(tris, rays, a.runs)[0]
                     same_cli = open(cli_out, "rb").read() == open(trace_out, "rb").read()
                     ref = np.load(trace_out)
                     same_py = (np.array_equal(ref["primitive_id"], result["primitive_ids"]) and

@@ -244,6 +244,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const uint64_t ticks_start = ticks();
   uint64_t proxy_ticks = 0;
   const ProxySet* const proxies = proxies_.get();
+  const uint32_t brick_count = store_->brick_count();
   // This batch's view of which bricks are resident. A proxy saves a load and
   // a build, never tracing time (testing one costs about as much as tracing a
   // small brick), so it is consulted only for bricks not known to be
@@ -256,7 +257,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     for (const uint32_t b : resident) known_resident[b] = 1;
   };
   if (proxies != nullptr && options.reorder) {
-    known_resident.assign(store_->brick_count(), 0);
+    known_resident.assign(brick_count, 0);
     mark_known_resident(cache_->resident_bricks());
   }
   const CacheCounters counters_before = cache_->counters();
@@ -277,16 +278,19 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // their bricks, round by round, with the chunk's per-ray state kept in the
   // thread's cache. Each ray visits the same bricks in the same order with
   // the same hit so far, so answers are the same as queued.
-  const uint32_t brick_count = store_->brick_count();
   // Only for scenes of a few bricks: with many, a chunk's rays spread over
   // so many bricks that each visit starts cold in a brick's structure, and
   // queueing the whole batch at each brick is faster (measured: the 732-brick
   // city twice as slow swept; docs/BENCHMARKS.md).
   const bool sweep = options.reorder && options.in_cache_sweep && cache_fits_scene_ &&
                      brick_count <= kSweepMaxBricks && cache_->counters().resident_bricks == brick_count;
+  // The in-cache sweep validates rays in its own chunks (one pass less over
+  // the rays' memory), except in strict mode, where a bad ray must stop the
+  // batch before anything is traced.
+  const bool validate_apart = !sweep || options.strict;
   // Grown only (new elements are value-initialised once); every element
   // below n is overwritten below, in parallel.
-  if (scratch->valid.size() < n && (!sweep || options.strict)) scratch->valid.resize(n);
+  if (validate_apart && scratch->valid.size() < n) scratch->valid.resize(n);
   if (!sweep && scratch->progress.size() < n) scratch->progress.resize(n);
   std::vector<uint8_t>& valid = scratch->valid;
   std::vector<RayProgress>& progress = scratch->progress;
@@ -298,13 +302,22 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   WideUpper wide;
   if (!use_flat) make_wide_upper(upper, wide);
 
+  // Ray i's answer before tracing (a miss), and whether it is a hit after.
+  auto reset_answer = [&](std::size_t i) {
+    if constexpr (kKind == QueryKind::kClosestHit) {
+      hits[i] = Hit{};
+    } else {
+      occluded[i] = 0;
+    }
+  };
+  auto answered_hit = [&](std::size_t i) -> uint64_t {
+    if constexpr (kKind == QueryKind::kClosestHit) return hits[i].is_hit();
+    return occluded[i] != 0;
+  };
+
   // Validation and reset of the outputs and per-ray progress, in parallel
   // chunks; the first bad ray of each chunk is kept so that strict mode names
   // the first of the batch.
-  // The in-cache sweep does this in its own chunks (one pass less over the
-  // rays' memory), except in strict mode, where a bad ray must stop the batch
-  // before anything is traced.
-  const bool validate_apart = !sweep || options.strict;
   const std::size_t check_chunks = validate_apart ? (n + kCheckGrain - 1) / kCheckGrain : 0;
   std::vector<uint64_t> chunk_invalid(check_chunks, 0);
   std::vector<std::size_t> chunk_first_bad(check_chunks, n);
@@ -317,11 +330,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         if (chunk_first_bad[c] == n) chunk_first_bad[c] = i;
         ++chunk_invalid[c];
       }
-      if constexpr (kKind == QueryKind::kClosestHit) {
-        hits[i] = Hit{};
-      } else {
-        occluded[i] = 0;
-      }
+      reset_answer(i);
     }
   });
   for (std::size_t c = 0; c < check_chunks; ++c) {
@@ -353,7 +362,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // bricks or in its queue. Counted only when the policy uses hints; one
   // relaxed atomic per window entry and one per traced chunk.
   const bool track_demand = options.reorder && !sweep && cache_->wants_schedule_hint();
-  std::vector<std::atomic<uint32_t>> demand(track_demand ? store_->brick_count() : 0);
+  std::vector<std::atomic<uint32_t>> demand(track_demand ? brick_count : 0);
   // Trace-ahead (below) is possible only when the budget cannot hold the scene.
   const bool ahead_possible = options.reorder && options.trace_ahead && !cache_fits_scene_;
   std::vector<std::array<uint32_t, kWindow>>& ahead_state = scratch->ahead_state;
@@ -509,19 +518,14 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       std::lock_guard<std::mutex> lock(pin_mutex);
       accel = pinned[brick].load(std::memory_order_relaxed);
       if (accel != nullptr) return accel;
-      const auto t0 = Clock::now();
       // Isolated: should another batch have evicted the brick, its build must
       // not pick up one of this batch's tasks, which could wait on this lock.
-      auto acquired = tbb::this_task_arena::isolate([&] { return cache_->acquire(brick); });
-      stats.seconds_build += seconds_since(t0);
-      if (!acquired.ok()) {
-        if (pin_status.ok()) pin_status = acquired.status();
+      const Status status = tbb::this_task_arena::isolate([&] { return acquire(brick, pins[brick]); });
+      if (!status.ok()) {
+        if (pin_status.ok()) pin_status = status;
         pin_failed.store(true, std::memory_order_relaxed);
         return nullptr;
       }
-      pins[brick] = std::move(acquired).value();
-      ++stats.brick_acquisitions;
-      ++(pins[brick].was_hit() ? stats.cache_hits : stats.cache_misses);
       accel = &pins[brick].accel();
       pinned[brick].store(accel, std::memory_order_release);
       return accel;
@@ -549,11 +553,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         if (validate_apart) {
           if (!valid[base + k]) continue;
         } else {
-          if constexpr (kKind == QueryKind::kClosestHit) {
-            hits[base + k] = Hit{};
-          } else {
-            occluded[base + k] = 0;
-          }
+          reset_answer(base + k);
           if (ray_problem(rays[base + k]) != nullptr) {
             ++task.invalid;
             continue;
@@ -606,13 +606,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
           }
         }
       }
-      for (std::size_t i = base; i < base + size; ++i) {
-        if constexpr (kKind == QueryKind::kClosestHit) {
-          task.hit += hits[i].is_hit();
-        } else {
-          task.hit += occluded[i] != 0;
-        }
-      }
+      for (std::size_t i = base; i < base + size; ++i) task.hit += answered_hit(i);
       task.ticks = ticks() - task_start;
     });
     OUTCORE_RETURN_IF_ERROR(pin_status);
@@ -1076,13 +1070,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   std::vector<uint64_t> chunk_hits(count_chunks, 0);
   tbb::parallel_for(std::size_t{0}, count_chunks, [&](std::size_t c) {
     uint64_t hit = 0;
-    for (std::size_t i = c * kCheckGrain; i < std::min(n, (c + 1) * kCheckGrain); ++i) {
-      if constexpr (kKind == QueryKind::kClosestHit) {
-        hit += hits[i].is_hit();
-      } else {
-        hit += occluded[i] != 0;
-      }
-    }
+    for (std::size_t i = c * kCheckGrain; i < std::min(n, (c + 1) * kCheckGrain); ++i) hit += answered_hit(i);
     chunk_hits[c] = hit;
   });
   for (const uint64_t hit : chunk_hits) stats.rays_hit += hit;

@@ -81,6 +81,16 @@ uint64_t one_brick_budget(const QueryEngine& engine) {
   return most;
 }
 
+// Strict mode refuses the batch with INVALID_ARGUMENT containing `message`.
+void expect_strict_error(QueryEngine& engine, const std::vector<Ray>& rays, const std::string& message) {
+  QueryOptions strict;
+  strict.strict = true;
+  std::vector<Hit> out(rays.size());
+  const Status s = engine.intersect(rays, out, strict);
+  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find(message), std::string::npos) << s.message();
+}
+
 void expect_matches_reference(const PackedScene& scene, const std::vector<Ray>& rays,
                               const std::vector<Hit>& hits) {
   std::size_t ties = 0, hits_seen = 0;
@@ -357,12 +367,7 @@ TEST(QueryEngine, InvalidRaysAreCountedMissesOrAStrictErrorNamingTheFirst) {
   EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, one_by_one), hits));
   EXPECT_STREQ(ray_problem(rays[6]), "an origin component is beyond +-1.844e18 (the intersector's range)");
   EXPECT_STREQ(ray_problem(rays[7]), "a direction component is beyond +-1.844e18 (the intersector's range)");
-  QueryOptions strict;
-  strict.strict = true;
-  std::vector<Hit> out(rays.size());
-  const Status s = engine->intersect(rays, out, strict);
-  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(s.message().find("ray 1: direction is zero"), std::string::npos) << s.message();
+  expect_strict_error(*engine, rays, "ray 1: direction is zero");
 }
 
 // A scene of a few bricks, all resident under a budget that holds it: the
@@ -410,12 +415,7 @@ TEST(QueryEngine, InCacheSweepAnswersAndCountsExactlyAsTheQueues) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
     EXPECT_TRUE(bitwise_equal(intersect(*engine, rays), expected)) << threads << " threads";
   }
-  QueryOptions strict;
-  strict.strict = true;
-  std::vector<Hit> out(rays.size());
-  const Status s = engine->intersect(rays, out, strict);
-  EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(s.message().find("ray 17: direction is zero"), std::string::npos) << s.message();
+  expect_strict_error(*engine, rays, "ray 17: direction is zero");
 
   // Concurrent swept batches: each gets its serial answer.
   std::vector<std::vector<Ray>> batches;
