@@ -1047,7 +1047,12 @@ Expected<PackSummary> ScenePacker::run() {
   // after the new one is in place.
   std::string displaced;
   if (fs::exists(output_path, ec)) {
-    displaced = output_path.string() + ".replaced-" + std::to_string(::getpid());
+    // A leftover of an interrupted run of a process with the same pid must not
+    // block the swap.
+    const std::string base = output_path.string() + ".replaced-" + std::to_string(::getpid());
+    displaced = base;
+    for (int attempt = 1; fs::exists(displaced, ec); ++attempt)
+      displaced = base + "-" + std::to_string(attempt);
     fs::rename(output_path, displaced, ec);
     if (ec) return io_error("cannot move the existing " + output_path.string() + " aside: " + ec.message());
   }

@@ -1,5 +1,7 @@
 #include "core/store/scene_packer.h"
 
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
@@ -585,6 +587,24 @@ TEST(ScenePackerAtomicity, OverwriteReplacesAnExistingStore) {
   ASSERT_TRUE(summary.ok()) << summary.status().to_string();
   expect_round_trip(out, {"gen:torus"}, 1000, *summary);
   EXPECT_EQ(directory_entries(dir.path()), std::vector<std::string>{"s"});
+}
+
+// The old store is moved aside under a name with the pid; a leftover of that
+// name (an interrupted run of a process that had the same pid) is kept and the
+// swap still succeeds.
+TEST(ScenePackerAtomicity, OverwriteSucceedsBesideALeftoverWithTheSameAsideName) {
+  TempDir dir;
+  const std::string out = dir.file("s");
+  ASSERT_TRUE(pack_scene(options_for({"gen:sphere?level=2"}, out, 64)).ok());
+  const std::string leftover = out + ".replaced-" + std::to_string(::getpid());
+  std::filesystem::create_directories(leftover + "/kept");
+  auto options = options_for({"gen:torus"}, out, 1000);
+  options.overwrite = true;
+  const auto summary = pack_scene(options);
+  ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+  expect_round_trip(out, {"gen:torus"}, 1000, *summary);
+  EXPECT_TRUE(std::filesystem::exists(leftover + "/kept"));
+  EXPECT_EQ(directory_entries(dir.path()).size(), 2u);
 }
 
 TEST(ScenePackerAtomicity, FailingPackWithOverwriteLeavesTheOldStoreIntact) {

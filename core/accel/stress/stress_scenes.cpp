@@ -1,9 +1,6 @@
 #include "core/accel/stress/stress_scenes.h"
 
-#include <unistd.h>
-
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -435,19 +432,10 @@ Status add_seam_scenes(StressScenes& out, bool quick, uint32_t stride) {
 }  // namespace
 
 Expected<std::shared_ptr<StressWorkspace>> StressWorkspace::create() {
-  static std::atomic<int> counter{0};
-  std::error_code ec;
-  const fs::path path = fs::temp_directory_path(ec) / ("outcore-stress-" + std::to_string(::getpid()) + "-" +
-                                                       std::to_string(counter.fetch_add(1)));
-  if (ec || !fs::create_directories(path, ec)) {
-    return io_error("stress: cannot create a temporary directory " + path.string() + ": " + ec.message());
-  }
-  return std::shared_ptr<StressWorkspace>(new StressWorkspace(path));
-}
-
-StressWorkspace::~StressWorkspace() {
-  std::error_code ec;
-  fs::remove_all(path_, ec);
+  std::shared_ptr<StressWorkspace> workspace(new StressWorkspace());
+  OUTCORE_RETURN_IF_ERROR(
+      workspace->directory_.create((fs::path(default_temp_directory()) / "outcore-stress-").string()));
+  return workspace;
 }
 
 bool inside_by_parity(const std::vector<Triangle>& triangles, const Vec3f& p) {

@@ -43,21 +43,23 @@
 #include "core/query/ray_types.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
+#include "core/util/temporary_directory.h"
 
 namespace outcore {
 
 enum class StressExpect : uint8_t { kReference, kHit, kMiss };
 
 // Removes its directory (packed stores of the seam scenes) when destroyed.
+// The name is made unique by mkdtemp: a leftover directory of an earlier
+// process with the same pid must not make the suite fail.
 class StressWorkspace {
  public:
   static Expected<std::shared_ptr<StressWorkspace>> create();
-  ~StressWorkspace();
-  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path path() const { return directory_.path(); }
 
  private:
-  explicit StressWorkspace(std::filesystem::path path) : path_(std::move(path)) {}
-  std::filesystem::path path_;
+  StressWorkspace() = default;
+  TemporaryDirectory directory_;
 };
 
 struct StressScene {

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -25,17 +26,19 @@ constexpr uint32_t kStride = 1;
 constexpr uint32_t kChecked = 400;
 #endif
 
+// A static object, not a leaked pointer: its destructor removes the seam
+// scenes' packed stores from the temporary directory when the tests exit.
 const StressScenes& scenes() {
-  static const StressScenes* kScenes = [] {
+  static const StressScenes kScenes = [] {
     StressOptions options;
     options.quick = true;
     options.models_dir = OUTCORE_MODELS_DIR;
     options.stride = kStride;
     auto made = make_stress_scenes(options);
     EXPECT_TRUE(made.ok()) << made.status().to_string();
-    return new StressScenes(made.ok() ? std::move(made).value() : StressScenes{});
+    return made.ok() ? std::move(made).value() : StressScenes{};
   }();
-  return *kScenes;
+  return kScenes;
 }
 
 const StressConfig& config(const std::string& name) {
@@ -65,6 +68,20 @@ TEST(StressSuite, CoversEveryFamilyEveryClosedModelAndEveryVariant) {
     for (const auto& s : scenes().scenes) found = found || s.family == family;
     EXPECT_TRUE(found) << family;
   }
+}
+
+TEST(StressSuite, WorkspacesAreDistinctAndRemovedWithTheirLastOwner) {
+  std::filesystem::path first_path;
+  {
+    auto first = StressWorkspace::create();
+    auto second = StressWorkspace::create();
+    ASSERT_TRUE(first.ok() && second.ok());
+    first_path = (*first)->path();
+    EXPECT_NE(first_path, (*second)->path());
+    EXPECT_TRUE(std::filesystem::is_directory(first_path));
+    EXPECT_TRUE(std::filesystem::is_directory((*second)->path()));
+  }
+  EXPECT_FALSE(std::filesystem::exists(first_path));
 }
 
 TEST(StressSuite, InteriorPointsAreInside) {
