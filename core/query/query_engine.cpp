@@ -14,6 +14,7 @@
 #include <cmath>
 #include <optional>
 
+#include "core/upper/upper_packet_traversal.h"
 #include "core/upper/upper_traversal.h"
 #include "core/util/json_writer.h"
 
@@ -377,6 +378,17 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   };
   std::vector<Hit>& ahead_hits = scratch->ahead_hits;
   ahead_hits.clear();
+  // Ray i's window was just filled with `found` keys: nothing of it used yet.
+  auto begin_window = [&](RayProgress& p, std::size_t i, uint32_t found) {
+    p.count = static_cast<uint8_t>(found);
+    p.complete = p.count < kWindow;
+    p.next = 0;
+    if (ahead_possible) ahead_state[i] = {};
+    p.listed = 0;
+    if (track_demand) {
+      for (uint8_t k = 0; k < p.count; ++k) demand[p.window[k].brick].fetch_add(1, std::memory_order_relaxed);
+    }
+  };
   // Moves ray i past its current brick; returns the next brick or kInvalidId.
   // A brick whose proxy the ray's remaining segment cannot hit is passed over
   // like a traced brick without a hit (it has none to give), so the ray's
@@ -405,18 +417,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       } else {
         if (p.complete) return kInvalidId;
         const SlabRay slab_ray(rays[i]);
-        p.count = static_cast<uint8_t>(
+        begin_window(
+            p, i,
             use_flat
                 ? next_bricks_flat(flat, slab_ray, rays[i].tnear, limit, p.last, p.window, counters.nodes)
                 : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, counters.nodes));
-        p.complete = p.count < kWindow;
-        p.next = 0;
-        if (ahead_possible) ahead_state[i] = {};
-        p.listed = 0;
-        if (track_demand) {
-          for (uint8_t k = 0; k < p.count; ++k)
-            demand[p.window[k].brick].fetch_add(1, std::memory_order_relaxed);
-        }
         if (p.count == 0) return kInvalidId;
         key = p.window[0];
         p.last = key;
@@ -794,16 +799,63 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
 
     // First brick of every ray, in parallel; per-chunk results merged in order.
     const auto t_upper = Clock::now();
-    const std::size_t chunks = (n + kRayGrain - 1) / kRayGrain;
-    std::vector<AdvanceCounters> chunk_counters(chunks);
+    const bool use_packet = !use_flat && options.packet_upper && packet_upper_available();
     if (scratch->first.size() < n) scratch->first.resize(n);
     std::vector<uint32_t>& first = scratch->first;
+    // Rays i .. i+7 through the upper hierarchy together when their
+    // directions share an octant (rays of neighbouring pixels; random rays
+    // rarely do); false, with nothing done, when they do not.
+    auto first_windows_by_packet = [&](std::size_t i, AdvanceCounters& counters) -> bool {
+      constexpr uint32_t kLanes = SlabPacket::kLanes;
+      uint32_t lanes = 0;
+      int octant = -1;
+      for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        if (!valid[i + lane]) continue;
+        const Vec3f& d = rays[i + lane].direction;
+        const int o = int(std::signbit(d.x)) | int(std::signbit(d.y)) << 1 | int(std::signbit(d.z)) << 2;
+        if (octant >= 0 && o != octant) return false;
+        octant = o;
+        lanes |= 1u << lane;
+      }
+      if (__builtin_popcount(lanes) < 2) return false;
+      SlabPacket packet;
+      std::array<std::array<BrickKey, kWindow>*, kLanes> windows;
+      for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        const std::size_t r = i + lane;
+        progress[r] = RayProgress{};
+        windows[lane] = &progress[r].window;
+        // Unused lanes get a copy of a used one: computed, never reported.
+        const std::size_t from =
+            (lanes >> lane & 1u) ? r : i + static_cast<std::size_t>(__builtin_ctz(lanes));
+        packet.set(lane, rays[from], rays[from].tnear, horizon(from));
+      }
+      uint32_t found[kLanes];
+      first_bricks_wide_packet(wide, packet, lanes, windows.data(), found, counters.nodes);
+      for (uint32_t lane = 0; lane < kLanes; ++lane) {
+        const std::size_t r = i + lane;
+        if (!(lanes >> lane & 1u)) {
+          first[r] = kInvalidId;
+          continue;
+        }
+        begin_window(progress[r], r, found[lane]);
+        first[r] = advance(r, counters);
+      }
+      return true;
+    };
+    const std::size_t chunks = (n + kRayGrain - 1) / kRayGrain;
+    std::vector<AdvanceCounters> chunk_counters(chunks);
     tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
       AdvanceCounters counters;
-      for (std::size_t i = c * kRayGrain; i < std::min(n, (c + 1) * kRayGrain); ++i) {
+      const std::size_t end = std::min(n, (c + 1) * kRayGrain);
+      for (std::size_t i = c * kRayGrain; i < end;) {
+        if (use_packet && i + SlabPacket::kLanes <= end && first_windows_by_packet(i, counters)) {
+          i += SlabPacket::kLanes;
+          continue;
+        }
         // Reset here, not in the validation pass: one pass over this memory.
         progress[i] = RayProgress{};
         first[i] = valid[i] ? advance(i, counters) : kInvalidId;
+        ++i;
       }
       chunk_counters[c] = counters;
     });

@@ -83,6 +83,11 @@ struct QueryOptions {
   // queueing the batch at bricks (query_engine.cpp). Answers are the same
   // either way; false forces the queues (for comparison).
   bool in_cache_sweep = true;
+  // The first upper pass walks the hierarchy for eight rays at once where
+  // eight consecutive rays go the same way (same direction octant), on CPUs
+  // with AVX (core/upper/upper_packet_traversal.h). Answers are the same
+  // either way; only the count of upper nodes visited differs.
+  bool packet_upper = true;
 };
 
 struct QueryStats {

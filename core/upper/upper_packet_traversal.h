@@ -1,0 +1,175 @@
+// The first upper pass of eight coherent rays at once: the same windows of
+// upcoming bricks as next_bricks_wide gives each ray from the start of its
+// segment, found in one walk of the 4-wide upper hierarchy for all eight.
+// Every box is tested against the eight rays in one AVX operation, and a node
+// is fetched, its children's masks taken and the stack handled once for the
+// packet instead of once per ray. Meant for rays that enter the same nodes
+// (camera rays of neighbouring pixels): a node is entered when any lane
+// enters it, so for rays that go separate ways it only adds tests.
+//
+// Bitwise the same keys as next_bricks_wide: each lane's entry into a box is
+// computed by the same IEEE operations in the same order (no FMA; the target
+// is AVX, not AVX2+FMA), and a lane takes a leaf only if its own test passes;
+// which nodes a lane's subtree was entered through prunes nothing its leaves'
+// own tests would keep (as in next_bricks_wide). Only the count of tested
+// boxes differs, since the order of the walk and so the pruning of full
+// windows differ.
+//
+// The AVX code is chosen at run time (the build targets x86-64-v2);
+// packet_upper_available() says whether this CPU has it.
+//
+// Thread-safety: pure functions over an immutable WideUpper.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#define OUTCORE_PACKET_UPPER 1
+#endif
+
+#include "core/upper/upper_traversal.h"
+
+namespace outcore {
+
+// Eight rays' slab inputs, one row per axis (lanes beyond the packet unused).
+struct SlabPacket {
+  static constexpr uint32_t kLanes = 8;
+  alignas(32) float origin[3][kLanes];
+  alignas(32) float inverse_direction[3][kLanes];
+  alignas(32) float tmin[kLanes];
+  alignas(32) float tmax[kLanes];
+
+  // Lane `lane` gets what SlabRay(ray) and [tmin, tmax] give next_bricks_wide.
+  void set(uint32_t lane, const Ray& ray, float segment_min, float segment_max) {
+    const SlabRay slab(ray);
+    for (int axis = 0; axis < 3; ++axis) {
+      origin[axis][lane] = slab.origin[axis];
+      inverse_direction[axis][lane] = slab.inverse_direction[axis];
+    }
+    tmin[lane] = segment_min;
+    tmax[lane] = segment_max;
+  }
+};
+
+// True when this CPU runs the AVX packet traversal.
+inline bool packet_upper_available() {
+#if defined(OUTCORE_PACKET_UPPER)
+  static const bool available = __builtin_cpu_supports("avx");
+  return available;
+#else
+  return false;
+#endif
+}
+
+#if defined(OUTCORE_PACKET_UPPER)
+namespace detail {
+
+// The slab test of one box against the eight rays: entries into `entry`,
+// returns the mask of the lanes that pass with their own [tmin, limit].
+// Per lane the operations of slab_test4 (min_exit is -inf: a first pass).
+__attribute__((target("avx"))) inline uint32_t slab_test_packet(const SlabPacket& packet, const float lo[3],
+                                                                const float hi[3], __m256 tmin, __m256 limit,
+                                                                float* entry) {
+  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+  const __m256 widen = _mm256_set1_ps(kSlabWiden);
+  __m256 near_all = tmin, far_all = limit;
+  for (int axis = 0; axis < 3; ++axis) {
+    const __m256 o = _mm256_load_ps(packet.origin[axis]);
+    const __m256 inv = _mm256_load_ps(packet.inverse_direction[axis]);
+    const __m256 t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(lo[axis]), o), inv);
+    const __m256 t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(hi[axis]), o), inv);
+    // As in slab_test4: minps / maxps give their second operand when either
+    // is NaN, right for a NaN t0; a NaN t1 gives t0.
+    const __m256 t1_nan = _mm256_cmp_ps(t1, t1, _CMP_UNORD_Q);
+    // Selects by and/andnot/or, not blendv: GCC lowers a 256-bit blendv on
+    // a compare mask through integer compares AVX lacks, lane by lane.
+    const __m256 t0_where_nan = _mm256_and_ps(t1_nan, t0);
+    const __m256 near = _mm256_or_ps(t0_where_nan, _mm256_andnot_ps(t1_nan, _mm256_min_ps(t0, t1)));
+    const __m256 far = _mm256_or_ps(t0_where_nan, _mm256_andnot_ps(t1_nan, _mm256_max_ps(t0, t1)));
+    const __m256 widened_near = _mm256_sub_ps(near, _mm256_mul_ps(_mm256_and_ps(near, abs_mask), widen));
+    const __m256 widened_far = _mm256_add_ps(far, _mm256_mul_ps(_mm256_and_ps(far, abs_mask), widen));
+    near_all = _mm256_max_ps(widened_near, near_all);
+    far_all = _mm256_min_ps(widened_far, far_all);
+  }
+  _mm256_store_ps(entry, near_all);
+  const __m256 ok = _mm256_and_ps(
+      _mm256_cmp_ps(near_all, far_all, _CMP_LE_OQ),
+      _mm256_cmp_ps(far_all, _mm256_set1_ps(-std::numeric_limits<float>::infinity()), _CMP_GE_OQ));
+  return static_cast<uint32_t>(_mm256_movemask_ps(ok));
+}
+
+}  // namespace detail
+
+// For each lane k of `lanes` (bit k), fills windows[k] and found[k] as
+// next_bricks_wide(wide, ray k, tmin[k], tmax[k], BrickKey{}, windows[k])
+// would. Adds the boxes tested for each lane to nodes_visited.
+template <std::size_t N>
+__attribute__((target("avx"))) void first_bricks_wide_packet(const WideUpper& wide, const SlabPacket& packet,
+                                                             uint32_t lanes,
+                                                             std::array<BrickKey, N>* const* windows,
+                                                             uint32_t* found, uint64_t& nodes_visited) {
+  constexpr uint32_t kLanes = SlabPacket::kLanes;
+  for (uint32_t lane = 0; lane < kLanes; ++lane) found[lane] = 0;
+  if (wide.nodes.empty() || lanes == 0) return;
+  const __m256 tmin = _mm256_load_ps(packet.tmin);
+  // Per lane: tmax, or the largest key's entry once the window is full.
+  alignas(32) float limit[kLanes];
+  for (uint32_t lane = 0; lane < kLanes; ++lane) limit[lane] = packet.tmax[lane];
+  const BrickKey after;
+  struct Pending {
+    uint32_t node;
+    uint32_t lanes;
+  };
+  std::array<Pending, 3 * kMaxUpperDepth + 4> stack;
+  uint32_t top = 0;
+  stack[top++] = {0, lanes};
+  while (top > 0) {
+    const Pending pending = stack[--top];
+    const WideUpper::Node& node = wide.nodes[pending.node];
+    nodes_visited += uint64_t(node.count) * uint64_t(__builtin_popcount(pending.lanes));
+    const __m256 lane_limit = _mm256_load_ps(limit);
+    for (uint32_t k = 0; k < node.count; ++k) {
+      const float lo[3] = {node.lo[0][k], node.lo[1][k], node.lo[2][k]};
+      const float hi[3] = {node.hi[0][k], node.hi[1][k], node.hi[2][k]};
+      alignas(32) float entry[kLanes];
+      uint32_t mask = detail::slab_test_packet(packet, lo, hi, tmin, lane_limit, entry) & pending.lanes;
+      if (mask == 0) continue;
+      if (!node.is_leaf[k]) {
+        stack[top++] = {node.child[k], mask};
+        continue;
+      }
+      while (mask != 0) {
+        const uint32_t lane = static_cast<uint32_t>(__builtin_ctz(mask));
+        mask &= mask - 1;
+        const BrickKey key{entry[lane], node.child[k]};
+        if (!(after < key)) continue;
+        std::array<BrickKey, N>& window = *windows[lane];
+        detail::insert_key(key, window, found[lane]);
+        if (found[lane] == N) limit[lane] = std::min(packet.tmax[lane], window[N - 1].entry);
+      }
+    }
+  }
+}
+#else
+// Without AVX (packet_upper_available() is false): lane by lane.
+template <std::size_t N>
+void first_bricks_wide_packet(const WideUpper& wide, const SlabPacket& packet, uint32_t lanes,
+                              std::array<BrickKey, N>* const* windows, uint32_t* found,
+                              uint64_t& nodes_visited) {
+  for (uint32_t lane = 0; lane < SlabPacket::kLanes; ++lane) {
+    found[lane] = 0;
+    if (!(lanes >> lane & 1u)) continue;
+    const SlabRay ray(Vec3f(packet.origin[0][lane], packet.origin[1][lane], packet.origin[2][lane]),
+                      Vec3f(packet.inverse_direction[0][lane], packet.inverse_direction[1][lane],
+                            packet.inverse_direction[2][lane]));
+    found[lane] = next_bricks_wide(wide, ray, packet.tmin[lane], packet.tmax[lane], BrickKey{},
+                                   *windows[lane], nodes_visited);
+  }
+}
+#endif
+
+}  // namespace outcore
