@@ -16,6 +16,8 @@
 
 #include "core/upper/upper_packet_traversal.h"
 #include "core/upper/upper_traversal.h"
+#include "core/upper/upper_wide8_traversal.h"
+#include "core/util/cpu_features.h"
 #include "core/util/json_writer.h"
 
 namespace outcore {
@@ -133,6 +135,23 @@ struct QueryEngine::Scratch {
   tbb::enumerable_thread_specific<SweepScratch> sweep;
 };
 
+struct QueryEngine::UpperWalks {
+  // A hierarchy of a few bricks is traversed flat (all leaf boxes tested at
+  // once), a larger one 4- or 8-wide: same bricks, same keys, fewer branches
+  // (upper_traversal.h).
+  FlatLeaves flat;
+  bool use_flat = false;
+  WideUpper wide;
+  WideUpper8 wide8;
+
+  explicit UpperWalks(const UpperHierarchy& upper) {
+    use_flat = make_flat_leaves(upper, flat);
+    if (use_flat) return;
+    make_wide_upper(upper, wide);
+    make_wide_upper(upper, wide8);
+  }
+};
+
 QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
                          std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report,
                          bool cache_fits_scene)
@@ -140,7 +159,8 @@ QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_pt
       cache_(std::move(cache)),
       proxies_(std::move(proxies)),
       proxy_report_(std::move(proxy_report)),
-      cache_fits_scene_(cache_fits_scene) {}
+      cache_fits_scene_(cache_fits_scene),
+      upper_walks_(std::make_unique<const UpperWalks>(store_->manifest().upper)) {}
 
 QueryEngine::~QueryEngine() = default;
 
@@ -262,7 +282,6 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     mark_known_resident(cache_->resident_bricks());
   }
   const CacheCounters counters_before = cache_->counters();
-  const UpperHierarchy& upper = store_->manifest().upper;
   const std::size_t n = rays.size();
   QueryStats stats;
   stats.rays = n;
@@ -295,13 +314,18 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   if (!sweep && scratch->progress.size() < n) scratch->progress.resize(n);
   std::vector<uint8_t>& valid = scratch->valid;
   std::vector<RayProgress>& progress = scratch->progress;
-  // A hierarchy of a few bricks is traversed flat (all leaf boxes tested at
-  // once), a larger one 4-wide: same bricks, same keys, fewer branches
-  // (upper_traversal.h).
-  FlatLeaves flat;
-  const bool use_flat = make_flat_leaves(upper, flat);
-  WideUpper wide;
-  if (!use_flat) make_wide_upper(upper, wide);
+  const FlatLeaves& flat = upper_walks_->flat;
+  const bool use_flat = upper_walks_->use_flat;
+  const WideUpper& wide = upper_walks_->wide;
+  const WideUpper8& wide8 = upper_walks_->wide8;
+  const bool use_avx = options.avx_upper && cpu_has_avx();
+  // The ray's next window: flat, 8-wide with AVX, else 4-wide.
+  auto next_window = [&](const SlabRay& slab_ray, float tmin, float limit, RayProgress& p,
+                         AdvanceCounters& counters) -> uint32_t {
+    if (use_flat) return next_bricks_flat(flat, slab_ray, tmin, limit, p.last, p.window, counters.nodes);
+    if (use_avx) return next_bricks_wide8(wide8, slab_ray, tmin, limit, p.last, p.window, counters.nodes);
+    return next_bricks_wide(wide, slab_ray, tmin, limit, p.last, p.window, counters.nodes);
+  };
 
   // Ray i's answer before tracing (a miss), and whether it is a hit after.
   auto reset_answer = [&](std::size_t i) {
@@ -417,11 +441,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       } else {
         if (p.complete) return kInvalidId;
         const SlabRay slab_ray(rays[i]);
-        begin_window(
-            p, i,
-            use_flat
-                ? next_bricks_flat(flat, slab_ray, rays[i].tnear, limit, p.last, p.window, counters.nodes)
-                : next_bricks_wide(wide, slab_ray, rays[i].tnear, limit, p.last, p.window, counters.nodes));
+        begin_window(p, i, next_window(slab_ray, rays[i].tnear, limit, p, counters));
         if (p.count == 0) return kInvalidId;
         key = p.window[0];
         p.last = key;
@@ -799,7 +819,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
 
     // First brick of every ray, in parallel; per-chunk results merged in order.
     const auto t_upper = Clock::now();
-    const bool use_packet = !use_flat && options.packet_upper && packet_upper_available();
+    const bool use_packet = !use_flat && use_avx;
     if (scratch->first.size() < n) scratch->first.resize(n);
     std::vector<uint32_t>& first = scratch->first;
     // Rays i .. i+7 through the upper hierarchy together when their

@@ -83,11 +83,13 @@ struct QueryOptions {
   // queueing the batch at bricks (query_engine.cpp). Answers are the same
   // either way; false forces the queues (for comparison).
   bool in_cache_sweep = true;
-  // The first upper pass walks the hierarchy for eight rays at once where
-  // eight consecutive rays go the same way (same direction octant), on CPUs
-  // with AVX (core/upper/upper_packet_traversal.h). Answers are the same
-  // either way; only the count of upper nodes visited differs.
-  bool packet_upper = true;
+  // On CPUs with AVX, the upper hierarchy is walked 8 boxes at a time for
+  // one ray (core/upper/upper_wide8_traversal.h), and in the first pass 8
+  // rays at a time where 8 consecutive rays share a direction octant
+  // (upper_packet_traversal.h); false walks it 4-wide with SSE (for
+  // comparison). Answers are the same either way; only the count of upper
+  // boxes tested differs.
+  bool avx_upper = true;
 };
 
 struct QueryStats {
@@ -162,6 +164,9 @@ class QueryEngine {
   // batch so that warm batches neither allocate nor page-fault it
   // (query_engine.cpp).
   struct Scratch;
+  // The upper hierarchy in the forms the traversals walk (flat, 4-wide,
+  // 8-wide), made once when the engine opens (query_engine.cpp).
+  struct UpperWalks;
 
   QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
               std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report, bool cache_fits_scene);
@@ -178,6 +183,7 @@ class QueryEngine {
   ProxyOpenReport proxy_report_;
   bool cache_fits_scene_;
   BrickAccelOptions accel_options_;
+  std::unique_ptr<const UpperWalks> upper_walks_;
   std::mutex scratch_mutex_;  // taken twice per batch, never per ray
   std::vector<std::unique_ptr<Scratch>> free_scratch_;
 };

@@ -303,7 +303,7 @@ TEST(QueryEngine, PacketFirstPassAnswersBitwiseAsOneRayAtATime) {
   rays[13].direction = {0, 0, 0};
   rays[2001].origin.x = std::numeric_limits<float>::infinity();
   QueryOptions single;
-  single.packet_upper = false;
+  single.avx_upper = false;
   QueryStats single_stats, packet_stats;
   const std::vector<Hit> expected = intersect(*engine, rays, single);
   expect_matches_reference(*scene, rays, expected);

@@ -15,8 +15,9 @@
 // boxes differs, since the order of the walk and so the pruning of full
 // windows differ.
 //
-// The AVX code is chosen at run time (the build targets x86-64-v2);
-// packet_upper_available() says whether this CPU has it.
+// The AVX code is chosen at run time (the build targets x86-64-v2): call it
+// on x86 only where cpu_has_avx() (core/util/cpu_features.h) is true;
+// elsewhere a lane-by-lane form gives the same windows.
 //
 // Thread-safety: pure functions over an immutable WideUpper.
 #pragma once
@@ -32,6 +33,7 @@
 #endif
 
 #include "core/upper/upper_traversal.h"
+#include "core/util/cpu_features.h"
 
 namespace outcore {
 
@@ -54,16 +56,6 @@ struct SlabPacket {
     tmax[lane] = segment_max;
   }
 };
-
-// True when this CPU runs the AVX packet traversal.
-inline bool packet_upper_available() {
-#if defined(OUTCORE_PACKET_UPPER)
-  static const bool available = __builtin_cpu_supports("avx");
-  return available;
-#else
-  return false;
-#endif
-}
 
 #if defined(OUTCORE_PACKET_UPPER)
 namespace detail {
@@ -155,7 +147,7 @@ __attribute__((target("avx"))) void first_bricks_wide_packet(const WideUpper& wi
   }
 }
 #else
-// Without AVX (packet_upper_available() is false): lane by lane.
+// Without x86: lane by lane (the same windows).
 template <std::size_t N>
 void first_bricks_wide_packet(const WideUpper& wide, const SlabPacket& packet, uint32_t lanes,
                               std::array<BrickKey, N>* const* windows, uint32_t* found,

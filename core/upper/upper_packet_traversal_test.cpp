@@ -96,7 +96,7 @@ void expect_packet_matches_single(const WideUpper& wide, const std::array<Ray, 8
 }
 
 TEST(UpperPacketTraversal, EveryLaneFindsBitwiseTheWindowOfItsOwnWalk) {
-  if (!packet_upper_available()) GTEST_SKIP() << "no AVX: the lane-by-lane form is next_bricks_wide itself";
+  if (!cpu_has_avx()) GTEST_SKIP() << "no AVX: the lane-by-lane form is next_bricks_wide itself";
   std::mt19937 rng(31);
   for (const std::size_t n : {1, 2, 7, 40, 300, 700}) {
     const UpperHierarchy upper = build_upper_hierarchy(grid_boxes(n, rng));

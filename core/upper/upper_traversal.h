@@ -311,25 +311,31 @@ uint32_t next_bricks_flat(const FlatLeaves& flat, const SlabRay& ray, float tmin
   return found;
 }
 
-// The upper hierarchy collapsed to 4 children per node (SoA boxes), for
-// next_bricks_wide: a quarter of the binary tree's nodes, each tested four
-// boxes per SSE instruction and without a branch per box. Built per batch
-// from the binary tree (about 10 us for 732 bricks).
-struct WideUpper {
+// The upper hierarchy collapsed to W children per node (SoA boxes), for
+// next_bricks_wide (W = 4, SSE) and next_bricks_wide8 (W = 8, AVX;
+// upper_wide8_traversal.h): a fraction of the binary tree's nodes, each
+// testing its W boxes in one SIMD operation and without a branch per box.
+// Built per batch from the binary tree (about 10 us for 732 bricks).
+template <uint32_t W>
+struct WideUpperOf {
+  static constexpr uint32_t kWidth = W;
   struct Node {
-    alignas(16) float lo[3][4];
-    alignas(16) float hi[3][4];
-    uint32_t child[4];  // a node index, or a brick id where is_leaf
+    alignas(W * 4 > 32 ? 32 : W * 4) float lo[3][W];
+    alignas(W * 4 > 32 ? 32 : W * 4) float hi[3][W];
+    uint32_t child[W];  // a node index, or a brick id where is_leaf
     uint32_t count = 0;
-    uint8_t is_leaf[4] = {0, 0, 0, 0};
+    uint8_t is_leaf[W] = {};
   };
   std::vector<Node> nodes;  // nodes[0] is the root
 };
+using WideUpper = WideUpperOf<4>;
 
 // Collapses `upper` into `wide`: each wide node takes the children of a
 // binary node and keeps opening its largest inner child (by surface area)
-// until it has four.
-inline void make_wide_upper(const UpperHierarchy& upper, WideUpper& wide) {
+// until it has W.
+template <uint32_t W>
+void make_wide_upper(const UpperHierarchy& upper, WideUpperOf<W>& wide) {
+  using Node = typename WideUpperOf<W>::Node;
   wide.nodes.clear();
   if (upper.nodes.empty()) return;
   std::vector<std::pair<uint32_t, uint32_t>> todo = {{0, 0}};  // (binary node, wide node)
@@ -341,7 +347,7 @@ inline void make_wide_upper(const UpperHierarchy& upper, WideUpper& wide) {
   while (!todo.empty()) {
     const auto [binary, index] = todo.back();
     todo.pop_back();
-    uint32_t kids[4];
+    uint32_t kids[W];
     uint32_t count = 0;
     const UpperNode& node = upper.nodes[binary];
     if (node.is_leaf) {
@@ -350,7 +356,7 @@ inline void make_wide_upper(const UpperHierarchy& upper, WideUpper& wide) {
       kids[count++] = node.child_or_brick;
       kids[count++] = node.child_or_brick + 1;
     }
-    while (count < 4) {
+    while (count < W) {
       int open = -1;
       for (uint32_t k = 0; k < count; ++k) {
         if (!upper.nodes[kids[k]].is_leaf && (open < 0 || area(kids[k]) > area(kids[open]))) open = int(k);
@@ -360,9 +366,9 @@ inline void make_wide_upper(const UpperHierarchy& upper, WideUpper& wide) {
       kids[open] = left;
       kids[count++] = left + 1;
     }
-    WideUpper::Node wide_node;
+    Node wide_node;
     wide_node.count = count;
-    for (uint32_t k = 0; k < 4; ++k) {
+    for (uint32_t k = 0; k < W; ++k) {
       const Aabb box = k < count ? upper.nodes[kids[k]].bounds : Aabb();
       for (int axis = 0; axis < 3; ++axis) {
         wide_node.lo[axis][k] = k < count ? box.lo[axis] : 0.0f;  // unused lanes: computed, never reported

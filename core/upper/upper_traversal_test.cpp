@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/upper/upper_hierarchy_builder.h"
+#include "core/upper/upper_wide8_traversal.h"
 
 namespace outcore {
 namespace {
@@ -106,7 +107,7 @@ uint32_t reference_next_bricks(const UpperHierarchy& upper, const SlabRay& ray, 
 
 // Front-to-back walks over large hierarchies find, window by window, what
 // testing every leaf finds, also when the horizon shrinks under the walk
-// (a hit found in a brick).
+// (a hit found in a brick): the binary, 4-wide and 8-wide (AVX) walks.
 TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
   std::mt19937 rng(9);
   for (const std::size_t n : {1, 2, 5, 9, 40, 300}) {
@@ -114,8 +115,11 @@ TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
     const UpperHierarchy upper = build_upper_hierarchy(boxes);
     WideUpper wide;
     make_wide_upper(upper, wide);
+    WideUpper8 wide8;
+    make_wide_upper(upper, wide8);
     if (n >= 9) {
       EXPECT_LT(wide.nodes.size(), upper.nodes.size() / 2);
+      EXPECT_LT(wide8.nodes.size(), wide.nodes.size());
     }
     for (int r = 0; r < 2000; ++r) {
       const Ray ray = tricky_ray(rng);
@@ -130,6 +134,15 @@ TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
         const uint32_t found_c = next_bricks_wide(wide, slab, ray.tnear, tmax, after, c, nodes);
         ASSERT_EQ(found_a, found_b) << "n " << n << " ray " << r << " step " << step;
         ASSERT_EQ(found_c, found_b) << "wide: n " << n << " ray " << r << " step " << step;
+        if (cpu_has_avx()) {
+          std::array<BrickKey, 4> d{};
+          const uint32_t found_d = next_bricks_wide8(wide8, slab, ray.tnear, tmax, after, d, nodes);
+          ASSERT_EQ(found_d, found_b) << "wide8: n " << n << " ray " << r << " step " << step;
+          for (uint32_t k = 0; k < found_d; ++k) {
+            ASSERT_EQ(d[k].brick, b[k].brick);
+            ASSERT_EQ(std::memcmp(&d[k].entry, &b[k].entry, sizeof(float)), 0);
+          }
+        }
         for (uint32_t k = 0; k < found_a; ++k) {
           ASSERT_EQ(a[k].brick, b[k].brick);
           ASSERT_EQ(std::memcmp(&a[k].entry, &b[k].entry, sizeof(float)), 0);
