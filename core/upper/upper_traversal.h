@@ -325,6 +325,7 @@ struct WideUpperOf {
     uint32_t child[W];  // a node index, or a brick id where is_leaf
     uint32_t count = 0;
     uint8_t is_leaf[W] = {};
+    uint32_t leaf_bits = 0;  // bit k: is_leaf[k]
   };
   std::vector<Node> nodes;  // nodes[0] is the root
 };
@@ -378,6 +379,7 @@ void make_wide_upper(const UpperHierarchy& upper, WideUpperOf<W>& wide) {
       if (k >= count) continue;
       if (upper.nodes[kids[k]].is_leaf) {
         wide_node.is_leaf[k] = 1;
+        wide_node.leaf_bits |= 1u << k;
         wide_node.child[k] = upper.nodes[kids[k]].child_or_brick;
       } else {
         wide_node.child[k] = static_cast<uint32_t>(wide.nodes.size());

@@ -83,15 +83,13 @@ __attribute__((target("avx"))) uint32_t next_bricks_wide8(const WideUpper8& wide
     // Once the window is full, only keys below its largest can enter.
     const float limit = found == N ? std::min(tmax, window[N - 1].entry) : tmax;
     alignas(32) float entry[8];
-    uint32_t mask =
+    const uint32_t mask =
         detail::slab_test8(ray, node.lo, node.hi, tmin, limit, after.entry, entry) & ((1u << node.count) - 1);
-    while (mask != 0) {
-      const uint32_t k = static_cast<uint32_t>(__builtin_ctz(mask));
-      mask &= mask - 1;
-      if (!node.is_leaf[k]) {
-        stack[top++] = node.child[k];
-        continue;
-      }
+    // Inner children and leaves apart: no branch per child on its kind.
+    for (uint32_t inner = mask & ~node.leaf_bits; inner != 0; inner &= inner - 1)
+      stack[top++] = node.child[__builtin_ctz(inner)];
+    for (uint32_t leaves = mask & node.leaf_bits; leaves != 0; leaves &= leaves - 1) {
+      const uint32_t k = static_cast<uint32_t>(__builtin_ctz(leaves));
       const BrickKey key{entry[k], node.child[k]};
       if (after < key) detail::insert_key(key, window, found);
     }
