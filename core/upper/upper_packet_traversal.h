@@ -38,19 +38,20 @@
 namespace outcore {
 
 // Eight rays' slab inputs, one row per axis (lanes beyond the packet unused).
+// The walk inverts the directions itself, eight per division: IEEE division
+// is correctly rounded, so each lane's inverse is bitwise SlabRay's.
 struct SlabPacket {
   static constexpr uint32_t kLanes = 8;
   alignas(32) float origin[3][kLanes];
-  alignas(32) float inverse_direction[3][kLanes];
+  alignas(32) float direction[3][kLanes];
   alignas(32) float tmin[kLanes];
   alignas(32) float tmax[kLanes];
 
   // Lane `lane` gets what SlabRay(ray) and [tmin, tmax] give next_bricks_wide.
   void set(uint32_t lane, const Ray& ray, float segment_min, float segment_max) {
-    const SlabRay slab(ray);
     for (int axis = 0; axis < 3; ++axis) {
-      origin[axis][lane] = slab.origin[axis];
-      inverse_direction[axis][lane] = slab.inverse_direction[axis];
+      origin[axis][lane] = ray.origin[axis];
+      direction[axis][lane] = ray.direction[axis];
     }
     tmin[lane] = segment_min;
     tmax[lane] = segment_max;
@@ -63,15 +64,16 @@ namespace detail {
 // The slab test of one box against the eight rays: entries into `entry`,
 // returns the mask of the lanes that pass with their own [tmin, limit].
 // Per lane the operations of slab_test4 (min_exit is -inf: a first pass).
-__attribute__((target("avx"))) inline uint32_t slab_test_packet(const SlabPacket& packet, const float lo[3],
-                                                                const float hi[3], __m256 tmin, __m256 limit,
-                                                                float* entry) {
+__attribute__((target("avx"))) inline uint32_t slab_test_packet(const SlabPacket& packet,
+                                                                const float (&inverse_direction)[3][8],
+                                                                const float lo[3], const float hi[3],
+                                                                __m256 tmin, __m256 limit, float* entry) {
   const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
   const __m256 widen = _mm256_set1_ps(kSlabWiden);
   __m256 near_all = tmin, far_all = limit;
   for (int axis = 0; axis < 3; ++axis) {
     const __m256 o = _mm256_load_ps(packet.origin[axis]);
-    const __m256 inv = _mm256_load_ps(packet.inverse_direction[axis]);
+    const __m256 inv = _mm256_load_ps(inverse_direction[axis]);
     const __m256 t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(lo[axis]), o), inv);
     const __m256 t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(hi[axis]), o), inv);
     // As in slab_test4: minps / maxps give their second operand when either
@@ -108,6 +110,11 @@ __attribute__((target("avx"))) void first_bricks_wide_packet(const WideUpper& wi
   for (uint32_t lane = 0; lane < kLanes; ++lane) found[lane] = 0;
   if (wide.nodes.empty() || lanes == 0) return;
   const __m256 tmin = _mm256_load_ps(packet.tmin);
+  alignas(32) float inverse_direction[3][kLanes];
+  for (int axis = 0; axis < 3; ++axis) {
+    _mm256_store_ps(inverse_direction[axis],
+                    _mm256_div_ps(_mm256_set1_ps(1.0f), _mm256_load_ps(packet.direction[axis])));
+  }
   // Per lane: tmax, or the largest key's entry once the window is full.
   alignas(32) float limit[kLanes];
   for (uint32_t lane = 0; lane < kLanes; ++lane) limit[lane] = packet.tmax[lane];
@@ -128,7 +135,8 @@ __attribute__((target("avx"))) void first_bricks_wide_packet(const WideUpper& wi
       const float lo[3] = {node.lo[0][k], node.lo[1][k], node.lo[2][k]};
       const float hi[3] = {node.hi[0][k], node.hi[1][k], node.hi[2][k]};
       alignas(32) float entry[kLanes];
-      uint32_t mask = detail::slab_test_packet(packet, lo, hi, tmin, lane_limit, entry) & pending.lanes;
+      uint32_t mask = detail::slab_test_packet(packet, inverse_direction, lo, hi, tmin, lane_limit, entry) &
+                      pending.lanes;
       if (mask == 0) continue;
       if (!node.is_leaf[k]) {
         stack[top++] = {node.child[k], mask};
@@ -155,9 +163,11 @@ void first_bricks_wide_packet(const WideUpper& wide, const SlabPacket& packet, u
   for (uint32_t lane = 0; lane < SlabPacket::kLanes; ++lane) {
     found[lane] = 0;
     if (!(lanes >> lane & 1u)) continue;
-    const SlabRay ray(Vec3f(packet.origin[0][lane], packet.origin[1][lane], packet.origin[2][lane]),
-                      Vec3f(packet.inverse_direction[0][lane], packet.inverse_direction[1][lane],
-                            packet.inverse_direction[2][lane]));
+    Ray lane_ray;
+    lane_ray.origin = Vec3f(packet.origin[0][lane], packet.origin[1][lane], packet.origin[2][lane]);
+    lane_ray.direction =
+        Vec3f(packet.direction[0][lane], packet.direction[1][lane], packet.direction[2][lane]);
+    const SlabRay ray(lane_ray);
     found[lane] = next_bricks_wide(wide, ray, packet.tmin[lane], packet.tmax[lane], BrickKey{},
                                    *windows[lane], nodes_visited);
   }

@@ -53,7 +53,6 @@ struct SlabRay {
   explicit SlabRay(const Ray& ray)
       : origin(ray.origin),
         inverse_direction(1.0f / ray.direction.x, 1.0f / ray.direction.y, 1.0f / ray.direction.z) {}
-  SlabRay(const Vec3f& o, const Vec3f& inverse) : origin(o), inverse_direction(inverse) {}
 };
 
 namespace detail {
