@@ -32,6 +32,7 @@
 #define OUTCORE_PACKET_UPPER 1
 #endif
 
+#include "core/upper/avx_slab.h"
 #include "core/upper/upper_traversal.h"
 #include "core/util/cpu_features.h"
 
@@ -68,32 +69,15 @@ __attribute__((target("avx"))) inline uint32_t slab_test_packet(const SlabPacket
                                                                 const float (&inverse_direction)[3][8],
                                                                 const float lo[3], const float hi[3],
                                                                 __m256 tmin, __m256 limit, float* entry) {
-  const __m256 abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
-  const __m256 widen = _mm256_set1_ps(kSlabWiden);
   __m256 near_all = tmin, far_all = limit;
   for (int axis = 0; axis < 3; ++axis) {
     const __m256 o = _mm256_load_ps(packet.origin[axis]);
     const __m256 inv = _mm256_load_ps(inverse_direction[axis]);
     const __m256 t0 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(lo[axis]), o), inv);
     const __m256 t1 = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(hi[axis]), o), inv);
-    // As in slab_test4: minps / maxps give their second operand when either
-    // is NaN, right for a NaN t0; a NaN t1 gives t0.
-    const __m256 t1_nan = _mm256_cmp_ps(t1, t1, _CMP_UNORD_Q);
-    // Selects by and/andnot/or, not blendv: GCC lowers a 256-bit blendv on
-    // a compare mask through integer compares AVX lacks, lane by lane.
-    const __m256 t0_where_nan = _mm256_and_ps(t1_nan, t0);
-    const __m256 near = _mm256_or_ps(t0_where_nan, _mm256_andnot_ps(t1_nan, _mm256_min_ps(t0, t1)));
-    const __m256 far = _mm256_or_ps(t0_where_nan, _mm256_andnot_ps(t1_nan, _mm256_max_ps(t0, t1)));
-    const __m256 widened_near = _mm256_sub_ps(near, _mm256_mul_ps(_mm256_and_ps(near, abs_mask), widen));
-    const __m256 widened_far = _mm256_add_ps(far, _mm256_mul_ps(_mm256_and_ps(far, abs_mask), widen));
-    near_all = _mm256_max_ps(widened_near, near_all);
-    far_all = _mm256_min_ps(widened_far, far_all);
+    fold_slab_axis_avx(t0, t1, near_all, far_all);
   }
-  _mm256_store_ps(entry, near_all);
-  const __m256 ok = _mm256_and_ps(
-      _mm256_cmp_ps(near_all, far_all, _CMP_LE_OQ),
-      _mm256_cmp_ps(far_all, _mm256_set1_ps(-std::numeric_limits<float>::infinity()), _CMP_GE_OQ));
-  return static_cast<uint32_t>(_mm256_movemask_ps(ok));
+  return finish_slab_avx(near_all, far_all, _mm256_set1_ps(-std::numeric_limits<float>::infinity()), entry);
 }
 
 }  // namespace detail
