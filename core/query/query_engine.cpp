@@ -48,8 +48,10 @@ struct AdvanceCounters {
   uint64_t proxy_ticks = 0;
   uint64_t ahead_visits = 0;  // visits whose tracing was done ahead of time
   uint64_t ahead_traces = 0;
+  uint64_t rays_hit = 0;  // rays finished with a hit (queued path)
 
   void add_to(QueryStats& stats) const {
+    stats.rays_hit += rays_hit;
     stats.upper_nodes_visited += nodes;
     stats.brick_visits += ahead_visits;
     stats.rays_traced_ahead += ahead_traces;
@@ -506,7 +508,14 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       if (k + kAdvancePrefetch < ids.size()) prefetch_ray_state(ids[k + kAdvancePrefetch]);
       const uint32_t ray = ids[k];
       const uint32_t next = advance(ray, counters);
-      if (next != kInvalidId) moved.emplace_back(next, ray);
+      if (next != kInvalidId) {
+        moved.emplace_back(next, ray);
+      } else {
+        // A ray with a brick finishes here, once, after its last brick
+        // (a ray without one, or an invalid one, cannot hit): counted while
+        // its answer is in the cache, not by a pass over the batch's hits.
+        counters.rays_hit += answered_hit(ray);
+      }
     }
   };
 
@@ -1137,8 +1146,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     }
   }
 
-  // Counted in parallel, summed in order (by the sweep's own tasks when it ran).
-  const std::size_t count_chunks = sweep ? 0 : (n + kCheckGrain - 1) / kCheckGrain;
+  // Counted in parallel, summed in order: only one by one; the sweep's tasks
+  // and the queues' tracing tasks count their own.
+  const std::size_t count_chunks = options.reorder ? 0 : (n + kCheckGrain - 1) / kCheckGrain;
   std::vector<uint64_t> chunk_hits(count_chunks, 0);
   tbb::parallel_for(std::size_t{0}, count_chunks, [&](std::size_t c) {
     uint64_t hit = 0;

@@ -313,6 +313,14 @@ TEST(QueryEngine, PacketFirstPassAnswersBitwiseAsOneRayAtATime) {
   EXPECT_EQ(packet_stats.brick_visits, single_stats.brick_visits);
   EXPECT_EQ(packet_stats.invalid_rays, 2u);
   EXPECT_EQ(packet_stats.rays_hit, single_stats.rays_hit);
+  EXPECT_EQ(packet_stats.rays_hit,
+            static_cast<uint64_t>(
+                std::count_if(expected.begin(), expected.end(), [](const Hit& h) { return h.is_hit(); })));
+  QueryOptions one_by_one;
+  one_by_one.reorder = false;
+  QueryStats one_by_one_stats;
+  EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, one_by_one, &one_by_one_stats), expected));
+  EXPECT_EQ(one_by_one_stats.rays_hit, packet_stats.rays_hit);
   EXPECT_GT(packet_stats.upper_nodes_visited, 0u);
   std::vector<uint8_t> occluded_single(rays.size()), occluded_packet(rays.size());
   ASSERT_TRUE(engine->occluded(rays, occluded_single, single).ok());
@@ -550,6 +558,15 @@ TEST(QueryEngine, TraceAheadUnderATightBudgetBuildsLessAndAnswersBitwiseTheSame)
         EXPECT_EQ(occluded_flags(*ahead, rays, {}, &on_any), expected_occluded);
         EXPECT_EQ(occluded_flags(*plain, rays, without, &off_any), expected_occluded);
         EXPECT_GT(on_any.rays_traced_ahead, 0u);
+        // The hit count (taken as rays finish) is the count of the answers.
+        const auto hit_count = static_cast<uint64_t>(
+            std::count_if(expected.begin(), expected.end(), [](const Hit& h) { return h.is_hit(); }));
+        const auto occluded_count =
+            static_cast<uint64_t>(std::count(expected_occluded.begin(), expected_occluded.end(), 1));
+        EXPECT_EQ(on.rays_hit, hit_count);
+        EXPECT_EQ(off.rays_hit, hit_count);
+        EXPECT_EQ(on_any.rays_hit, occluded_count);
+        EXPECT_EQ(off_any.rays_hit, occluded_count);
         // A warm second batch under the same budget.
         EXPECT_TRUE(bitwise_equal(intersect(*ahead, rays), expected));
       });
