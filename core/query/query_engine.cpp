@@ -48,10 +48,12 @@ struct AdvanceCounters {
   uint64_t proxy_ticks = 0;
   uint64_t ahead_visits = 0;  // visits whose tracing was done ahead of time
   uint64_t ahead_traces = 0;
-  uint64_t rays_hit = 0;  // rays finished with a hit (queued path)
+  uint64_t rays_hit = 0;      // rays finished with a hit (queued path)
+  uint64_t invalid_rays = 0;  // found invalid in the queued path's first pass
 
   void add_to(QueryStats& stats) const {
     stats.rays_hit += rays_hit;
+    stats.invalid_rays += invalid_rays;
     stats.upper_nodes_visited += nodes;
     stats.brick_visits += ahead_visits;
     stats.rays_traced_ahead += ahead_traces;
@@ -306,13 +308,14 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // city twice as slow swept; docs/BENCHMARKS.md).
   const bool sweep = options.reorder && options.in_cache_sweep && cache_fits_scene_ &&
                      brick_count <= kSweepMaxBricks && cache_->counters().resident_bricks == brick_count;
-  // The in-cache sweep validates rays in its own chunks (one pass less over
-  // the rays' memory), except in strict mode, where a bad ray must stop the
-  // batch before anything is traced.
-  const bool validate_apart = !sweep || options.strict;
+  // The in-cache sweep validates rays in its own chunks, and the queues in
+  // the chunks of their first upper pass (one pass less over the rays'
+  // memory), except in strict mode, where a bad ray must stop the batch
+  // before anything is traced.
+  const bool validate_apart = !options.reorder || options.strict;
   // Grown only (new elements are value-initialised once); every element
   // below n is overwritten below, in parallel.
-  if (validate_apart && scratch->valid.size() < n) scratch->valid.resize(n);
+  if ((!sweep || validate_apart) && scratch->valid.size() < n) scratch->valid.resize(n);
   if (!sweep && scratch->progress.size() < n) scratch->progress.resize(n);
   std::vector<uint8_t>& valid = scratch->valid;
   std::vector<RayProgress>& progress = scratch->progress;
@@ -876,6 +879,13 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
       AdvanceCounters counters;
       const std::size_t end = std::min(n, (c + 1) * kRayGrain);
+      if (!validate_apart) {
+        for (std::size_t i = c * kRayGrain; i < end; ++i) {
+          valid[i] = ray_problem(rays[i]) == nullptr;
+          counters.invalid_rays += !valid[i];
+          reset_answer(i);
+        }
+      }
       for (std::size_t i = c * kRayGrain; i < end;) {
         if (use_packet && i + SlabPacket::kLanes <= end && first_windows_by_packet(i, counters)) {
           i += SlabPacket::kLanes;
