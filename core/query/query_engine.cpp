@@ -344,6 +344,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     if constexpr (kKind == QueryKind::kClosestHit) return hits[i].is_hit();
     return occluded[i] != 0;
   };
+  // Resets ray i's answer; true when the ray is valid (ray_problem).
+  auto reset_and_check = [&](std::size_t i) {
+    reset_answer(i);
+    return ray_problem(rays[i]) == nullptr;
+  };
 
   // Validation and reset of the outputs and per-ray progress, in parallel
   // chunks; the first bad ray of each chunk is kept so that strict mode names
@@ -354,13 +359,12 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   tbb::parallel_for(std::size_t{0}, check_chunks, [&](std::size_t c) {
     const std::size_t end = std::min(n, (c + 1) * kCheckGrain);
     for (std::size_t i = c * kCheckGrain; i < end; ++i) {
-      const bool ok = ray_problem(rays[i]) == nullptr;
+      const bool ok = reset_and_check(i);
       valid[i] = ok;
       if (!ok) {
         if (chunk_first_bad[c] == n) chunk_first_bad[c] = i;
         ++chunk_invalid[c];
       }
-      reset_answer(i);
     }
   });
   for (std::size_t c = 0; c < check_chunks; ++c) {
@@ -536,6 +540,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
         trace(pin.accel(), std::span<const uint32_t>(&id, 1));
         ++stats.brick_visits;
       }
+      stats.rays_hit += answered_hit(i);
       counters.add_to(stats);
       proxy_ticks += counters.proxy_ticks;
       stats.seconds_brick += seconds_since(t0);
@@ -589,12 +594,9 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       for (std::size_t k = 0; k < size; ++k) {
         if (validate_apart) {
           if (!valid[base + k]) continue;
-        } else {
-          reset_answer(base + k);
-          if (ray_problem(rays[base + k]) != nullptr) {
-            ++task.invalid;
-            continue;
-          }
+        } else if (!reset_and_check(base + k)) {
+          ++task.invalid;
+          continue;
         }
         local.progress[k] = RayProgress{};
         const uint32_t brick = advance_with(local.progress[k], base + k, task.counters);
@@ -881,9 +883,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       const std::size_t end = std::min(n, (c + 1) * kRayGrain);
       if (!validate_apart) {
         for (std::size_t i = c * kRayGrain; i < end; ++i) {
-          valid[i] = ray_problem(rays[i]) == nullptr;
+          valid[i] = reset_and_check(i);
           counters.invalid_rays += !valid[i];
-          reset_answer(i);
         }
       }
       for (std::size_t i = c * kRayGrain; i < end;) {
@@ -1156,16 +1157,6 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     }
   }
 
-  // Counted in parallel, summed in order: only one by one; the sweep's tasks
-  // and the queues' tracing tasks count their own.
-  const std::size_t count_chunks = options.reorder ? 0 : (n + kCheckGrain - 1) / kCheckGrain;
-  std::vector<uint64_t> chunk_hits(count_chunks, 0);
-  tbb::parallel_for(std::size_t{0}, count_chunks, [&](std::size_t c) {
-    uint64_t hit = 0;
-    for (std::size_t i = c * kCheckGrain; i < std::min(n, (c + 1) * kCheckGrain); ++i) hit += answered_hit(i);
-    chunk_hits[c] = hit;
-  });
-  for (const uint64_t hit : chunk_hits) stats.rays_hit += hit;
   const CacheCounters counters_after = cache_->counters();
   stats.brick_builds = counters_after.builds - counters_before.builds;
   stats.evictions = counters_after.evictions - counters_before.evictions;

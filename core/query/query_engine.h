@@ -23,8 +23,9 @@
 // are conservative, so answers are bitwise the same with them off.
 //
 // Invalid rays (NaN/Inf components, components beyond +-1.844e18, zero
-// direction, tnear < 0 or not finite, tnear > tfar, NaN tfar) are answered as misses and counted; with strict
-// they are an INVALID_ARGUMENT naming the first bad ray.
+// direction, tnear < 0 or not finite, tnear > tfar, NaN tfar) are answered
+// as misses and counted; with strict they are an INVALID_ARGUMENT naming the
+// first bad ray.
 //
 // Thread-safety: intersect() and occluded() may be called concurrently from
 // several threads; concurrent batches share the cache (and its budget).

@@ -27,11 +27,6 @@
 #include <cstdint>
 #include <limits>
 
-#if defined(__x86_64__) || defined(__i386__)
-#include <immintrin.h>
-#define OUTCORE_PACKET_UPPER 1
-#endif
-
 #include "core/upper/avx_slab.h"
 #include "core/upper/upper_traversal.h"
 #include "core/util/cpu_features.h"
@@ -59,7 +54,7 @@ struct SlabPacket {
   }
 };
 
-#if defined(OUTCORE_PACKET_UPPER)
+#if defined(__x86_64__) || defined(__i386__)
 namespace detail {
 
 // The slab test of one box against the eight rays: entries into `entry`,
@@ -122,7 +117,7 @@ __attribute__((target("avx"))) void first_bricks_wide_packet(const WideUpper& wi
       uint32_t mask = detail::slab_test_packet(packet, inverse_direction, lo, hi, tmin, lane_limit, entry) &
                       pending.lanes;
       if (mask == 0) continue;
-      if (!node.is_leaf[k]) {
+      if (!(node.leaf_bits >> k & 1u)) {
         stack[top++] = {node.child[k], mask};
         continue;
       }

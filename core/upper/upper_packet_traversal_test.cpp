@@ -9,38 +9,17 @@
 #include <vector>
 
 #include "core/upper/upper_hierarchy_builder.h"
+#include "tests/support/grid_boxes.h"
 
 namespace outcore {
 namespace {
-
-// Boxes on a grid with gaps, overlaps, flat sides and shared faces, as in a
-// city of bricks: slab planes, NaN slabs and equal entries all occur.
-std::vector<Aabb> grid_boxes(std::size_t n, std::mt19937& rng) {
-  std::uniform_int_distribution<int> cell(-6, 6), kind(0, 4);
-  std::vector<Aabb> boxes;
-  for (std::size_t i = 0; i < n; ++i) {
-    Aabb b;
-    const Vec3f lo(float(cell(rng)), float(cell(rng)) * 0.25f, float(cell(rng)));
-    b.extend(lo);
-    switch (kind(rng)) {
-      case 0: b.extend(lo + Vec3f(1, 1, 1)); break;
-      case 1: b.extend(lo + Vec3f(2, 0, 1)); break;  // flat in y
-      case 2: b.extend(lo + Vec3f(0.5f, 3, 0.25f)); break;
-      case 3: b.extend(lo + Vec3f(3, 0.5f, 3)); break;
-      default: break;  // a point
-    }
-    if (i > 0 && kind(rng) == 0) b = boxes[i - 1];
-    boxes.push_back(b);
-  }
-  return boxes;
-}
 
 // Eight rays: from one pinhole through neighbouring pixels (coherent), or
 // each its own (origins on grid planes, zero direction components, short
 // segments), so lanes go separate ways.
 std::array<Ray, 8> packet_rays(std::mt19937& rng, bool coherent) {
   std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  std::uniform_int_distribution<int> cell(-6, 6), pick(0, 3);
+  std::uniform_int_distribution<int> pick(0, 3);
   std::array<Ray, 8> rays;
   const Vec3f eye(8 * u(rng), 4 + 2 * u(rng), 8 * u(rng));
   const Vec3f look = Vec3f(2 * u(rng), 0, 2 * u(rng)) - eye;
@@ -49,14 +28,11 @@ std::array<Ray, 8> packet_rays(std::mt19937& rng, bool coherent) {
     if (coherent) {
       r.origin = eye;
       r.direction = look + Vec3f(0.01f * float(lane), 0.002f * float(lane % 3), 0);
+      if (pick(rng) == 0) r.tfar = 3.0f;
+      if (pick(rng) == 0) r.tnear = 0.5f;
     } else {
-      r.origin = pick(rng) == 0 ? Vec3f(float(cell(rng)), float(cell(rng)) * 0.25f, float(cell(rng)))
-                                : Vec3f(6 * u(rng), 6 * u(rng), 6 * u(rng));
-      r.direction = Vec3f(pick(rng) == 0 ? 0.0f : u(rng), pick(rng) == 0 ? 0.0f : u(rng), u(rng));
-      if (r.direction == Vec3f(0, 0, 0)) r.direction = {0, 0, 1};
+      r = testing::grid_ray(rng, 6, 0.25f);
     }
-    if (pick(rng) == 0) r.tfar = 3.0f;
-    if (pick(rng) == 0) r.tnear = 0.5f;
   }
   return rays;
 }
@@ -99,7 +75,7 @@ TEST(UpperPacketTraversal, EveryLaneFindsBitwiseTheWindowOfItsOwnWalk) {
   if (!cpu_has_avx()) GTEST_SKIP() << "no AVX: the lane-by-lane form is next_bricks_wide itself";
   std::mt19937 rng(31);
   for (const std::size_t n : {1, 2, 7, 40, 300, 700}) {
-    const UpperHierarchy upper = build_upper_hierarchy(grid_boxes(n, rng));
+    const UpperHierarchy upper = build_upper_hierarchy(testing::grid_boxes(n, rng, 6, 0.25f));
     WideUpper wide;
     make_wide_upper(upper, wide);
     for (int p = 0; p < 600; ++p) {

@@ -10,43 +10,18 @@
 
 #include "core/upper/upper_hierarchy_builder.h"
 #include "core/upper/upper_wide8_traversal.h"
+#include "tests/support/grid_boxes.h"
 
 namespace outcore {
 namespace {
 
-// Boxes that overlap, coincide, are flat (zero extent on an axis) or share
-// faces, so that slab planes, NaN slabs and equal entries all occur.
+// The grid of [-2, 2] (dense overlaps) for the boxes, [-4, 4] for the rays.
 std::vector<Aabb> tricky_boxes(std::size_t n, std::mt19937& rng) {
-  std::uniform_int_distribution<int> cell(-2, 2), kind(0, 3);
-  std::vector<Aabb> boxes;
-  for (std::size_t i = 0; i < n; ++i) {
-    Aabb b;
-    const Vec3f lo(float(cell(rng)), float(cell(rng)), float(cell(rng)));
-    b.extend(lo);
-    switch (kind(rng)) {
-      case 0: b.extend(lo + Vec3f(1, 1, 1)); break;
-      case 1: b.extend(lo + Vec3f(2, 0, 1)); break;  // flat in y
-      case 2: b.extend(lo + Vec3f(0.5f, 3, 0.25f)); break;
-      default: break;  // a point
-    }
-    if (i > 0 && kind(rng) == 0) b = boxes[i - 1];  // coinciding with the previous one
-    boxes.push_back(b);
-  }
-  return boxes;
+  return testing::grid_boxes(n, rng, 2);
 }
 
 Ray tricky_ray(std::mt19937& rng) {
-  std::uniform_int_distribution<int> cell(-4, 4), zero(0, 3);
-  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
-  Ray r;
-  // Origins on grid planes half the time (origin on a slab plane).
-  r.origin = zero(rng) == 0 ? Vec3f(float(cell(rng)), float(cell(rng)), float(cell(rng)))
-                            : Vec3f(4 * u(rng), 4 * u(rng), 4 * u(rng));
-  r.direction = Vec3f(zero(rng) == 0 ? 0.0f : u(rng), zero(rng) == 0 ? 0.0f : u(rng), u(rng));
-  if (r.direction == Vec3f(0, 0, 0)) r.direction = {0, 0, 1};
-  if (zero(rng) == 0) r.tfar = 2.0f;
-  if (zero(rng) == 0) r.tnear = 0.5f;
-  return r;
+  return testing::grid_ray(rng, 4);
 }
 
 // Walks every brick of the ray front to back with window size N, both ways,

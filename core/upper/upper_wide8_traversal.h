@@ -19,10 +19,6 @@
 #include <cstdio>
 #include <cstdlib>
 
-#if defined(__x86_64__) || defined(__i386__)
-#include <immintrin.h>
-#endif
-
 #include "core/upper/avx_slab.h"
 #include "core/upper/upper_traversal.h"
 #include "core/util/cpu_features.h"
