@@ -46,14 +46,18 @@ inline uint64_t id_key(uint32_t geometry_id, uint32_t primitive_id) {
   return (uint64_t{geometry_id} << 32) | primitive_id;
 }
 
+// Origins and directions go to Embree with negative zeros as +0 (x + 0 is x
+// otherwise): the identity transform of an EmbreeBrickSet's instances turns
+// -0 into +0, and a zero's sign can reach u and v, so every path feeds
+// Embree the same values.
 inline void fill_ray(const Ray& ray, float tfar, RTCRay& out) {
-  out.org_x = ray.origin.x;
-  out.org_y = ray.origin.y;
-  out.org_z = ray.origin.z;
+  out.org_x = ray.origin.x + 0.0f;
+  out.org_y = ray.origin.y + 0.0f;
+  out.org_z = ray.origin.z + 0.0f;
   out.tnear = ray.tnear;
-  out.dir_x = ray.direction.x;
-  out.dir_y = ray.direction.y;
-  out.dir_z = ray.direction.z;
+  out.dir_x = ray.direction.x + 0.0f;
+  out.dir_y = ray.direction.y + 0.0f;
+  out.dir_z = ray.direction.z + 0.0f;
   out.time = 0.0f;
   out.tfar = tfar;
   out.mask = 0xffffffffu;
@@ -133,10 +137,10 @@ class ChunkCoherence {
 
 }  // namespace
 
-float EmbreeBrickAccel::direction_spread_limit(const Vec3f& origin) const {
-  const Vec3f offset = origin - center_;
+float EmbreeBrickAccel::direction_spread_limit(const TraceTarget& target, const Vec3f& origin) {
+  const Vec3f offset = origin - target.center;
   const float distance = std::sqrt(dot(offset, offset));
-  const float subtended = distance > 0 ? max_extent_ / distance : kCoherentDirectionSpread;
+  const float subtended = distance > 0 ? target.max_extent / distance : kCoherentDirectionSpread;
   return std::min(kCoherentDirectionSpread, kCoherentAngularFraction * subtended);
 }
 
@@ -291,6 +295,7 @@ uint64_t EmbreeBrickAccel::reserve_bytes(uint64_t triangle_count, const EmbreeBr
 struct EmbreeBrickAccel::TieRecord {
   float t;
   uint32_t prim;
+  const EmbreeBrickAccel* holder;  // the brick of prim (null: kNoPrim)
   uint64_t key;
 };
 
@@ -322,19 +327,25 @@ void EmbreeBrickAccel::tie_filter(const RTCFilterFunctionNArguments* args) {
     TieRecord& best = records[RTCRayN_id(args->ray, n, lane)];
     bool better = t < best.t;
     if (t == best.t)
-      better = self->key_of(prim) < (best.prim != kNoPrim ? self->key_of(best.prim) : best.key);
+      better = self->key_of(prim) < (best.prim != kNoPrim ? best.holder->key_of(best.prim) : best.key);
     if (!better) {
       args->valid[lane] = 0;
       continue;
     }
     best.t = t;
     best.prim = prim;
+    best.holder = self;
     tfar = widen(t);
   }
 }
 
 void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
   if (scene_ == nullptr) return;
+  intersect_in(TraceTarget{scene_, max_extent_, center_, &coherent_rays_}, ray_ids, rays, hits);
+}
+
+void EmbreeBrickAccel::intersect_in(const TraceTarget& target, std::span<const uint32_t> ray_ids,
+                                    const Ray* rays, Hit* hits) {
   TieRecord records[kChunk];
   RTCRayHit found[kChunk];
   uint32_t found_ray[kChunk];
@@ -357,7 +368,7 @@ void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* r
       const Hit& best = hits[i];
       const float tfar = std::min(ray.tfar, widen(best.t));
       if (!(tfar > ray.tnear)) continue;  // nothing in (tnear, tfar] can improve it
-      records[count] = {best.t, kNoPrim,
+      records[count] = {best.t, kNoPrim, nullptr,
                         best.is_hit() ? id_key(best.geometry_id, best.primitive_id) : ~uint64_t{0}};
       RTCRayHit& rayhit = found[count];
       fill_ray(ray, tfar, rayhit.ray);
@@ -376,16 +387,17 @@ void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* r
       const std::size_t run_end = std::min(count, run + kRun);
       ChunkCoherence coherence;
       for (std::size_t c = run; c < run_end; ++c) coherence.add(rays[found_ray[c]]);
-      if (coherence.coherent(max_extent_, direction_spread_limit(rays[found_ray[run]].origin))) {
-        rtcIntersect1M(scene_, &coherent.rtc, found + run, static_cast<unsigned>(run_end - run),
+      if (coherence.coherent(target.max_extent,
+                             direction_spread_limit(target, rays[found_ray[run]].origin))) {
+        rtcIntersect1M(target.scene, &coherent.rtc, found + run, static_cast<unsigned>(run_end - run),
                        sizeof(RTCRayHit));
-        coherent_rays_.fetch_add(run_end - run, std::memory_order_relaxed);
-        for (std::size_t c = run; c < run_end; ++c) prefetch_hit(records[c].prim);
+        target.coherent_rays->fetch_add(run_end - run, std::memory_order_relaxed);
+        for (std::size_t c = run; c < run_end; ++c) prefetch_hit(records[c]);
         continue;
       }
       for (std::size_t c = run; c < run_end; ++c) {
-        rtcIntersect1(scene_, &incoherent.rtc, &found[c]);
-        prefetch_hit(records[c].prim);
+        rtcIntersect1(target.scene, &incoherent.rtc, &found[c]);
+        prefetch_hit(records[c]);
         if (c >= written + kLag) {
           write_hits(found, records, found_ray, written, c + 1 - kLag, hits);
           written = c + 1 - kLag;
@@ -396,8 +408,12 @@ void EmbreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* r
   }
 }
 
+inline void EmbreeBrickAccel::prefetch_hit(const TieRecord& record) {
+  if (record.prim == kNoPrim) return;
+  record.holder->prefetch_hit(record.prim);
+}
+
 inline void EmbreeBrickAccel::prefetch_hit(uint32_t prim) const {
-  if (prim == kNoPrim) return;
   if (prim_is_triangle_) {
     __builtin_prefetch(&hit_records_[prim]);
     __builtin_prefetch(reinterpret_cast<const char*>(&hit_records_[prim]) + sizeof(HitRecord) - 1);
@@ -407,24 +423,30 @@ inline void EmbreeBrickAccel::prefetch_hit(uint32_t prim) const {
 }
 
 void EmbreeBrickAccel::write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
-                                  std::size_t begin, std::size_t end, Hit* hits) const {
+                                  std::size_t begin, std::size_t end, Hit* hits) {
   for (std::size_t c = begin; c < end; ++c) {
     const TieRecord& record = records[c];
     if (record.prim == kNoPrim) continue;  // nothing here beats what the ray had
     assert(found[c].hit.primID == record.prim);
-    const uint32_t k = triangle_of(record.prim);
+    const EmbreeBrickAccel& holder = *record.holder;
+    const HitRecord& hit_record = holder.hit_records_[holder.triangle_of(record.prim)];
     Hit& best = hits[found_ray[c]];
     best.t = record.t;
-    best.geometry_id = hit_records_[k].geometry_id;
-    best.primitive_id = hit_records_[k].primitive_id;
+    best.geometry_id = hit_record.geometry_id;
+    best.primitive_id = hit_record.primitive_id;
     best.u = found[c].hit.u;  // Embree keeps the last accepted candidate's: the record's
     best.v = found[c].hit.v;
-    best.normal = hit_records_[k].normal;
+    best.normal = hit_record.normal;
   }
 }
 
 void EmbreeBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
   if (scene_ == nullptr) return;
+  occluded_in(TraceTarget{scene_, max_extent_, center_, &coherent_rays_}, ray_ids, rays, occluded);
+}
+
+void EmbreeBrickAccel::occluded_in(const TraceTarget& target, std::span<const uint32_t> ray_ids,
+                                   const Ray* rays, uint8_t* occluded) {
   RTCRay found[kChunk];
   uint32_t found_ray[kChunk];
   RTCIntersectContext incoherent;
@@ -446,11 +468,13 @@ void EmbreeBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* ra
       const std::size_t run_end = std::min(count, run + kRun);
       ChunkCoherence coherence;
       for (std::size_t c = run; c < run_end; ++c) coherence.add(rays[found_ray[c]]);
-      if (coherence.coherent(max_extent_, direction_spread_limit(rays[found_ray[run]].origin))) {
-        rtcOccluded1M(scene_, &coherent, found + run, static_cast<unsigned>(run_end - run), sizeof(RTCRay));
-        coherent_rays_.fetch_add(run_end - run, std::memory_order_relaxed);
+      if (coherence.coherent(target.max_extent,
+                             direction_spread_limit(target, rays[found_ray[run]].origin))) {
+        rtcOccluded1M(target.scene, &coherent, found + run, static_cast<unsigned>(run_end - run),
+                      sizeof(RTCRay));
+        target.coherent_rays->fetch_add(run_end - run, std::memory_order_relaxed);
       } else {
-        for (std::size_t c = run; c < run_end; ++c) rtcOccluded1(scene_, &incoherent, &found[c]);
+        for (std::size_t c = run; c < run_end; ++c) rtcOccluded1(target.scene, &incoherent, &found[c]);
       }
     }
     for (std::size_t c = 0; c < count; ++c) {

@@ -151,15 +151,29 @@ class EmbreeBrickAccel final : public BrickAccel {
   EmbreeBrickAccel() = default;
   struct TieRecord;
   struct TieContext;
+  friend class EmbreeBrickSet;
+  // What the tracing loops run against: one brick's scene, or a scene
+  // instancing many bricks (EmbreeBrickSet); its bounds for the coherence test.
+  struct TraceTarget {
+    RTCScene scene;
+    float max_extent;
+    Vec3f center;
+    std::atomic<uint64_t>* coherent_rays;
+  };
+  static void intersect_in(const TraceTarget& target, std::span<const uint32_t> ray_ids, const Ray* rays,
+                           Hit* hits);
+  static void occluded_in(const TraceTarget& target, std::span<const uint32_t> ray_ids, const Ray* rays,
+                          uint8_t* occluded);
   static void tie_filter(const RTCFilterFunctionNArguments* args);
   uint64_t buffer_bytes() const;
   void prefetch_hit(uint32_t prim) const;
-  void write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
-                  std::size_t begin, std::size_t end, Hit* hits) const;
-  // The brick triangle behind Embree's primID, and its user id as one key.
+  static void prefetch_hit(const TieRecord& record);
+  static void write_hits(const RTCRayHit* found, const TieRecord* records, const uint32_t* found_ray,
+                         std::size_t begin, std::size_t end, Hit* hits);
   // Largest per-axis spread of unit directions a coherent run may have, for
   // rays from about `origin` (see kCoherentAngularFraction).
-  float direction_spread_limit(const Vec3f& origin) const;
+  static float direction_spread_limit(const TraceTarget& target, const Vec3f& origin);
+  // The brick triangle behind Embree's primID, and its user id as one key.
   uint32_t triangle_of(uint32_t prim) const { return prim_is_triangle_ ? prim : indices_[3 * prim] / 3; }
   uint64_t key_of(uint32_t prim) const;
 

@@ -34,6 +34,7 @@ struct TraceArgs {
   bool no_reorder = false;
   bool no_trace_ahead = false;
   bool no_in_cache_sweep = false;
+  bool no_brick_set = false;
   bool no_avx_upper = false;
   bool no_proxies = false;
   std::optional<int64_t> proxy_res;  // unset: the default resolution
@@ -142,6 +143,7 @@ int run_trace(const TraceArgs& args) {
   query_options.reorder = !args.no_reorder;
   query_options.trace_ahead = !args.no_trace_ahead;
   query_options.in_cache_sweep = !args.no_in_cache_sweep;
+  query_options.brick_set = !args.no_brick_set;
   query_options.avx_upper = !args.no_avx_upper;
   query_options.strict = args.strict;
   // Repeats run the same batch again on the now warm cache (the first run is
@@ -216,6 +218,11 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--no-in-cache-sweep", args->no_in_cache_sweep,
                 "When every brick is resident, still queue the batch at bricks instead of sweeping chunks of "
                 "rays through them (for comparison; answers are the same)");
+  cmd->add_flag(
+      "--no-brick-set", args->no_brick_set,
+      "When every brick is resident, still walk the upper hierarchy and trace brick by brick instead of "
+      "one Embree scene instancing all bricks (for comparison and per-brick statistics; answers are "
+      "the same)");
   cmd->add_flag("--no-avx-upper", args->no_avx_upper,
                 "Walk the upper hierarchy 4-wide with SSE, one ray at a time, instead of 8-wide and in 8-ray "
                 "packets with AVX (for comparison; answers are the same)");

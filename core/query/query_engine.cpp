@@ -14,6 +14,7 @@
 #include <cmath>
 #include <optional>
 
+#include "core/accel/embree_brick_set.h"
 #include "core/upper/upper_packet_traversal.h"
 #include "core/upper/upper_traversal.h"
 #include "core/upper/upper_wide8_traversal.h"
@@ -230,15 +231,13 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   for (const BrickRecord& brick : store->manifest().bricks)
     reserved += builder->reserve_bytes(brick.triangle_count);
   const bool cache_fits_scene = reserved <= options.cache_bytes;
-  // Under such a budget bricks are built again and again, and builds, not
-  // tracing, take the time: Embree's low build quality builds about 3x
-  // faster than medium and traces about 20% slower (brick_accel_factory.cpp);
-  // answers are bitwise the same at every quality (the tie filter settles
-  // traversal order; tested). A quality the user set is kept.
-  if (!cache_fits_scene && options.brick_accel == "embree" && !accel_options.contains("quality")) {
-    accel_options["quality"] = "low";
-    OUTCORE_ASSIGN_OR_RETURN(builder, make_brick_builder(options.brick_accel, accel_options));
-  }
+  // The build quality is never changed behind the user's back, although
+  // under a tight budget Embree's low quality would build about 3x faster:
+  // a ray running in an axis plane (a zero direction component) along a
+  // mesh edge in that plane hits one of the edge's two triangles or the
+  // other depending on which of Embree's boxes have a face in the plane,
+  // i.e. on the tree, so answers would depend on the budget
+  // (QueryEngine.ABudgetBelowTheSceneKeepsTheBuildQualityAndEveryAnswer).
   auto cache =
       std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
   if (options.access_trace) cache->set_access_trace(options.access_trace);
@@ -247,6 +246,7 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   auto engine = std::unique_ptr<QueryEngine>(new QueryEngine(
       std::move(store), std::move(cache), std::move(proxies), std::move(proxy_report), cache_fits_scene));
   engine->accel_options_ = std::move(accel_options);
+  engine->embree_bricks_ = options.brick_accel == "embree";
   return engine;
 }
 
@@ -306,8 +306,13 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   // so many bricks that each visit starts cold in a brick's structure, and
   // queueing the whole batch at each brick is faster (measured: the 732-brick
   // city twice as slow swept; docs/BENCHMARKS.md).
-  const bool sweep = options.reorder && options.in_cache_sweep && cache_fits_scene_ &&
-                     brick_count <= kSweepMaxBricks && cache_->counters().resident_bricks == brick_count;
+  const bool all_resident = cache_fits_scene_ && cache_->counters().resident_bricks == brick_count;
+  // The resident bricks' one Embree scene (below): for scenes of a few
+  // bricks, like the sweep, and batches large enough to repay building it.
+  const bool in_set = options.reorder && options.brick_set && embree_bricks_ && all_resident &&
+                      brick_count > 0 && brick_count <= kSweepMaxBricks && n >= options.brick_set_min_rays;
+  const bool sweep =
+      !in_set && options.reorder && options.in_cache_sweep && all_resident && brick_count <= kSweepMaxBricks;
   // The in-cache sweep validates rays in its own chunks, and the queues in
   // the chunks of their first upper pass (one pass less over the rays'
   // memory), except in strict mode, where a bad ray must stop the batch
@@ -315,8 +320,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const bool validate_apart = !options.reorder || options.strict;
   // Grown only (new elements are value-initialised once); every element
   // below n is overwritten below, in parallel.
-  if ((!sweep || validate_apart) && scratch->valid.size() < n) scratch->valid.resize(n);
-  if (!sweep && scratch->progress.size() < n) scratch->progress.resize(n);
+  if ((!(sweep || in_set) || validate_apart) && scratch->valid.size() < n) scratch->valid.resize(n);
+  if (!(sweep || in_set) && scratch->progress.size() < n) scratch->progress.resize(n);
   std::vector<uint8_t>& valid = scratch->valid;
   std::vector<RayProgress>& progress = scratch->progress;
   const FlatLeaves& flat = upper_walks_->flat;
@@ -545,6 +550,53 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       proxy_ticks += counters.proxy_ticks;
       stats.seconds_brick += seconds_since(t0);
     }
+  } else if (in_set) {
+    // Every brick pinned for the batch (cache hits: all are resident), then
+    // one Embree scene over them all; chunks of consecutive rays go through
+    // it as they would through one brick.
+    std::vector<PinnedBrick> pins(brick_count);
+    std::vector<const EmbreeBrickAccel*> accels(brick_count);
+    for (uint32_t b = 0; b < brick_count; ++b) {
+      OUTCORE_RETURN_IF_ERROR(acquire(b, pins[b]));
+      accels[b] = static_cast<const EmbreeBrickAccel*>(&pins[b].accel());  // embree_bricks_
+    }
+    const auto t_set = Clock::now();
+    OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<EmbreeBrickSet> set, EmbreeBrickSet::build(accels));
+    stats.seconds_upper += seconds_since(t_set);
+    const auto t_trace = Clock::now();
+    const std::size_t chunks = (n + kSweepRays - 1) / kSweepRays;
+    std::vector<std::array<uint64_t, 3>> chunk_counts(chunks);  // traced, invalid, hit
+    tbb::parallel_for(std::size_t{0}, chunks, [&](std::size_t c) {
+      std::array<uint32_t, kSweepRays> ids;
+      const std::size_t base = c * kSweepRays;
+      const std::size_t size = std::min(n - base, kSweepRays);
+      std::size_t count = 0;
+      uint64_t invalid = 0;
+      for (std::size_t i = base; i < base + size; ++i) {
+        if (validate_apart) {
+          if (!valid[i]) continue;
+        } else if (!reset_and_check(i)) {
+          ++invalid;
+          continue;
+        }
+        ids[count++] = static_cast<uint32_t>(i);
+      }
+      const std::span<const uint32_t> traced(ids.data(), count);
+      if constexpr (kKind == QueryKind::kClosestHit) {
+        set->intersect(traced, rays.data(), hits);
+      } else {
+        set->occluded(traced, rays.data(), occluded);
+      }
+      uint64_t hit = 0;
+      for (const uint32_t i : traced) hit += answered_hit(i);
+      chunk_counts[c] = {count, invalid, hit};
+    });
+    for (const auto& [traced, invalid, hit] : chunk_counts) {
+      stats.rays_in_brick_set += traced;
+      if (!validate_apart) stats.invalid_rays += invalid;
+      stats.rays_hit += hit;
+    }
+    stats.seconds_brick += seconds_since(t_trace);
   } else if (sweep) {
     // Each brick is pinned by the first task to reach it and held to the end
     // of the batch (a cache hit: all are resident); one lock per brick per
@@ -1186,6 +1238,7 @@ std::string QueryStats::to_json() const {
   j.begin_object();
   j.field("rays", rays).field("invalid_rays", invalid_rays).field("rays_hit", rays_hit);
   j.field("upper_nodes_visited", upper_nodes_visited).field("brick_visits", brick_visits);
+  j.field("rays_in_brick_set", rays_in_brick_set);
   j.field("proxy_tests", proxy_tests).field("bricks_skipped_by_proxy", bricks_skipped_by_proxy);
   j.field("proxy_bytes", proxy_bytes);
   j.field("rays_traced_ahead", rays_traced_ahead);
@@ -1227,6 +1280,12 @@ std::string QueryStats::to_text() const {
       static_cast<unsigned long long>(evictions), peak_bytes_resident / 1048576.0,
       cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
   std::string text = buf;
+  if (rays_in_brick_set > 0) {
+    std::snprintf(buf, sizeof buf,
+                  "  one Embree scene over all bricks: %llu rays (brick visits not counted)\n",
+                  static_cast<unsigned long long>(rays_in_brick_set));
+    text += buf;
+  }
   if (proxy_bytes > 0) {
     const uint64_t candidates = brick_visits + bricks_skipped_by_proxy;
     std::snprintf(buf, sizeof buf,

@@ -31,6 +31,7 @@
 // several threads; concurrent batches share the cache (and its budget).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -91,6 +92,17 @@ struct QueryOptions {
   // comparison). Answers are the same either way; only the count of upper
   // boxes tested differs.
   bool avx_upper = true;
+  // When every brick is resident, the budget holds the scene, the bricks
+  // are Embree's and there are at most 16 of them, a batch of at least
+  // brick_set_min_rays rays goes through one Embree scene that instances
+  // every brick (core/accel/embree_brick_set.h): one Embree call per ray
+  // instead of the upper walk and a call per brick visit, and coherent
+  // streams across bricks. Answers are the same either way; false walks the
+  // upper hierarchy (for comparison, and for the per-brick statistics, which
+  // the set cannot give). Smaller batches take the sweep: the set is built
+  // per batch (tens of microseconds).
+  bool brick_set = true;
+  std::size_t brick_set_min_rays = 16384;
 };
 
 struct QueryStats {
@@ -99,6 +111,7 @@ struct QueryStats {
   uint64_t rays_hit = 0;
   uint64_t upper_nodes_visited = 0;
   uint64_t brick_visits = 0;             // (ray, brick) traversals
+  uint64_t rays_in_brick_set = 0;        // traced through the resident bricks' one scene (no visits counted)
   uint64_t rays_traced_ahead = 0;        // traced at a brick before reaching it (some never do)
   uint64_t proxy_tests = 0;              // (ray, brick) candidates tested against a proxy
   uint64_t bricks_skipped_by_proxy = 0;  // of those, visits avoided (the ray cannot hit the brick)
@@ -152,8 +165,7 @@ class QueryEngine {
   const ProxySet* proxies() const { return proxies_.get(); }
   // How the proxies were obtained (loaded from proxies.bin or built).
   const ProxyOpenReport& proxy_report() const { return proxy_report_; }
-  // The brick structure's options in effect: the user's, plus quality=low for
-  // embree when the budget cannot hold the scene and no quality was given.
+  // The brick structure's options in effect (the user's).
   const BrickAccelOptions& accel_options() const { return accel_options_; }
   // Whether the budget holds every brick at once (by their reservations).
   bool cache_fits_scene() const { return cache_fits_scene_; }
@@ -183,6 +195,7 @@ class QueryEngine {
   std::unique_ptr<const ProxySet> proxies_;
   ProxyOpenReport proxy_report_;
   bool cache_fits_scene_;
+  bool embree_bricks_ = false;  // the bricks are EmbreeBrickAccels
   BrickAccelOptions accel_options_;
   std::unique_ptr<const UpperWalks> upper_walks_;
   std::mutex scratch_mutex_;  // taken twice per batch, never per ray

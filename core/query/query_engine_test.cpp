@@ -241,6 +241,29 @@ std::vector<Ray> camera_rays(const Aabb& box, int side) {
   return rays;
 }
 
+// Rays that run in an axis plane through the scene's middle (a zero
+// direction component, origins on the plane, many with negative zeros): on
+// the symmetric test meshes the plane holds mesh edges, so these rays cross
+// triangles exactly at their edges and run along the faces of boxes.
+std::vector<Ray> axis_plane_rays(const Aabb& box) {
+  const Vec3f mid = box.center();
+  const Vec3f e = box.extent();
+  std::vector<Ray> rays;
+  for (int k = 0; k < 64; ++k) {
+    Ray r;
+    r.origin = Vec3f(-0.0f, mid.y + 0.01f * e.y * (k - 32), box.lo.z - 1.0f);
+    r.direction = Vec3f(k % 2 ? -0.0f : 0.0f, -0.0f, 1.0f);
+    rays.push_back(r);
+    r.origin = Vec3f(mid.x + 0.01f * e.x * k, -0.0f, -0.0f);
+    r.direction = Vec3f(k % 3 ? -1.0f : 1.0f, -0.0f, 0.001f * k);
+    rays.push_back(r);
+    r.origin = Vec3f(mid.x, mid.y + 0.013f * e.y * (k - 32), mid.z);
+    r.direction = Vec3f(k % 4 ? 1.0f : -1.0f, 0.0f, 0.0f);
+    rays.push_back(r);
+  }
+  return rays;
+}
+
 // Duplicated triangles under camera rays: in a batch the rays go as coherent
 // packets, shuffled or one by one as single rays, split into uneven batches
 // as packets of other compositions. Every hit is a tie between the copies,
@@ -480,6 +503,110 @@ TEST(QueryEngine, InCacheSweepAnswersAndCountsExactlyAsTheQueues) {
     EXPECT_TRUE(bitwise_equal(got[b], serial[b])) << "batch " << b;
 }
 
+// The resident bricks' one Embree scene (EmbreeBrickSet) against the upper
+// walk brick by brick (the sweep and the queues) and the float64 reference:
+// bitwise the same hits and occlusions, ties between duplicated triangles
+// across and inside bricks, overlapping bricks, coherent camera rays (streams
+// across bricks), rays with negative zeros, short segments and invalid rays,
+// at 1 and 2 threads, shuffled, and under a budget that cannot hold the
+// scene (no set).
+TEST(QueryEngine, ResidentBrickSetAnswersBitwiseAsBrickByBrick) {
+  struct Case {
+    std::vector<std::string> inputs;
+    uint32_t brick_triangles;
+  };
+  const std::vector<Case> cases = {
+      {{"gen:sphere?level=4", "gen:sphere?level=4"}, 1100},
+      {{"gen:stadium?size=50&level=4&object=2&segments=4"}, 1500},
+      {{"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5"}, 1200},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.inputs[0] + " bricks of " + std::to_string(c.brick_triangles));
+    const auto scene = pack(c.inputs, c.brick_triangles);
+    auto engine = engine_for(*scene);
+    const uint32_t bricks = engine->store().brick_count();
+    ASSERT_GT(bricks, 1u);
+    ASSERT_LE(bricks, 16u);
+    std::vector<Ray> rays = mixed_rays(scene->bounds, 3000, 77);
+    const std::vector<Ray> camera = camera_rays(scene->bounds, 64);
+    rays.insert(rays.end(), camera.begin(), camera.end());
+    const std::size_t generic = rays.size();
+    const std::vector<Ray> in_plane = axis_plane_rays(scene->bounds);
+    rays.insert(rays.end(), in_plane.begin(), in_plane.end());
+    rays[5].direction = {0, 0, 0};
+    rays[2999].tnear = 2.0f;
+    rays[2999].tfar = 1.0f;
+    QueryOptions walked;
+    walked.brick_set = false;
+    QueryOptions queued = walked;
+    queued.in_cache_sweep = false;
+    QueryOptions in_set;
+    in_set.brick_set_min_rays = 0;
+    QueryStats cold;
+    const std::vector<Hit> expected = intersect(*engine, rays, queued, &cold);
+    EXPECT_EQ(cold.brick_builds, bricks) << "every brick resident after the first batch";
+    // The in-plane rays graze edges on purpose: many are float/float64 edge
+    // ties, so the reference is checked on the others.
+    expect_matches_reference(*scene, std::vector<Ray>(rays.begin(), rays.begin() + generic),
+                             std::vector<Hit>(expected.begin(), expected.begin() + generic));
+    EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, walked), expected)) << "swept";
+
+    QueryStats set_stats;
+    EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, in_set, &set_stats), expected)) << "set";
+    EXPECT_EQ(set_stats.rays_in_brick_set, rays.size() - 2);
+    EXPECT_EQ(set_stats.invalid_rays, 2u);
+    EXPECT_EQ(set_stats.brick_visits, 0u);
+    EXPECT_EQ(set_stats.brick_builds, 0u);
+    EXPECT_EQ(set_stats.brick_acquisitions, bricks);
+    EXPECT_EQ(set_stats.cache_hits, bricks);
+    uint64_t hit = 0;
+    for (const Hit& h : expected) hit += h.is_hit();
+    EXPECT_EQ(set_stats.rays_hit, hit);
+    EXPECT_GT(hit, rays.size() / 4);
+    // The default takes the set only for large batches.
+    QueryStats small;
+    intersect(*engine, rays, {}, &small);
+    EXPECT_EQ(small.rays_in_brick_set, 0u);
+
+    for (const int threads : {1, 2}) {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+      EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, in_set), expected)) << threads << " threads";
+    }
+    std::vector<std::size_t> order(rays.size());
+    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::shuffle(order.begin(), order.end(), std::mt19937_64(5));
+    std::vector<Ray> shuffled(rays.size());
+    for (std::size_t i = 0; i < order.size(); ++i) shuffled[i] = rays[order[i]];
+    const auto shuffled_hits = intersect(*engine, shuffled, in_set);
+    std::vector<Hit> unshuffled(rays.size());
+    for (std::size_t i = 0; i < order.size(); ++i) unshuffled[order[i]] = shuffled_hits[i];
+    EXPECT_TRUE(bitwise_equal(unshuffled, expected)) << "shuffled";
+
+    // Any hit.
+    std::vector<uint8_t> occluded_walked(rays.size()), occluded_set(rays.size(), 9);
+    QueryStats any_set;
+    ASSERT_TRUE(engine->occluded(rays, occluded_walked, queued).ok());
+    ASSERT_TRUE(engine->occluded(rays, occluded_set, in_set, &any_set).ok());
+    EXPECT_EQ(occluded_set, occluded_walked);
+    EXPECT_EQ(any_set.rays_in_brick_set, rays.size() - 2);
+    for (std::size_t i = 0; i < rays.size(); ++i)
+      EXPECT_EQ(occluded_set[i] != 0, expected[i].is_hit()) << "ray " << i;
+
+    QueryOptions strict = in_set;
+    strict.strict = true;
+    std::vector<Hit> out(rays.size());
+    const Status s = engine->intersect(rays, out, strict);
+    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(s.message().find("ray 5: direction is zero"), std::string::npos) << s.message();
+
+    // A budget of one brick: never all resident, so no set, same answers.
+    auto tight = engine_for(*scene, one_brick_budget(*engine));
+    QueryStats tight_stats;
+    EXPECT_TRUE(bitwise_equal(intersect(*tight, rays, in_set, &tight_stats), expected)) << "one brick";
+    EXPECT_EQ(tight_stats.rays_in_brick_set, 0u);
+  }
+}
+
 TEST(QueryEngine, ConcurrentBatchesShareOneCacheAndEachGetsItsSerialAnswer) {
   const auto scene = pack({"gen:city?of=(gen:sphere?level=3)&copies=40"}, 300);
   auto reference = engine_for(*scene);
@@ -546,9 +673,11 @@ TEST(QueryEngine, TraceAheadUnderATightBudgetBuildsLessAndAnswersBitwiseTheSame)
         EXPECT_TRUE(bitwise_equal(intersect(*plain, rays, without, &off), expected));
         EXPECT_GT(on.rays_traced_ahead, 0u);
         EXPECT_EQ(off.rays_traced_ahead, 0u);
-        // With proxies these rays rebuild next to nothing either way.
+        // With proxies these rays rebuild next to nothing either way, and
+        // which bricks concurrent builds evict depends on their timing: a
+        // build or so per thread either way.
         if (proxies) {
-          EXPECT_LE(on.brick_builds, off.brick_builds);
+          EXPECT_LE(on.brick_builds, off.brick_builds + static_cast<uint64_t>(threads));
         } else {
           EXPECT_LT(on.brick_builds, off.brick_builds) << scene_bricks << " bricks";
         }
@@ -584,38 +713,54 @@ std::unique_ptr<QueryEngine> engine_with_quality(const PackedScene& scene, uint6
   return std::move(engine).value();
 }
 
-// The engine builds Embree bricks at low quality under a tight budget, so the
-// answer must not depend on the quality: ties (duplicated geometry), packets
-// (camera rays) and incoherent rays, closest and any hit.
-TEST(QueryEngine, EmbreeBuildQualityNeverChangesAnAnswer) {
+// The build quality changes no answer of rays in general position; rays
+// running in an axis plane along mesh edges may hit the other triangle of an
+// edge (Embree culls the boxes whose face such a ray runs along, and which
+// boxes those are depends on the tree), never anything farther than the
+// other side of that edge.
+TEST(QueryEngine, EmbreeBuildQualityChangesAnAnswerOnlyAtAnEdgeInTheRaysAxisPlane) {
   const auto scene = pack({"gen:sphere?level=4", "gen:sphere?level=4", "gen:torus?cx=1.5"}, 400);
   std::vector<Ray> rays = mixed_rays(scene->bounds, 4000, 31);
   const std::vector<Ray> camera = camera_rays(scene->bounds, 64);
   rays.insert(rays.end(), camera.begin(), camera.end());
+  const std::size_t generic = rays.size();
+  const std::vector<Ray> in_plane = axis_plane_rays(scene->bounds);
+  rays.insert(rays.end(), in_plane.begin(), in_plane.end());
   auto medium = engine_with_quality(*scene, uint64_t{1} << 30, "medium");
   const std::vector<Hit> expected = intersect(*medium, rays);
   const std::vector<uint8_t> expected_occluded = occluded_flags(*medium, rays);
   for (const std::string quality : {"low", "high"}) {
+    SCOPED_TRACE(quality);
     auto engine = engine_with_quality(*scene, uint64_t{1} << 30, quality);
-    EXPECT_TRUE(bitwise_equal(intersect(*engine, rays), expected)) << quality;
-    EXPECT_EQ(occluded_flags(*engine, rays), expected_occluded) << quality;
+    const std::vector<Hit> got = intersect(*engine, rays);
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      if (std::memcmp(&got[i], &expected[i], sizeof(Hit)) == 0) continue;
+      EXPECT_GE(i, generic) << "ray " << i << " is in general position";
+      EXPECT_EQ(got[i].is_hit(), expected[i].is_hit()) << "ray " << i;
+      EXPECT_NEAR(got[i].t, expected[i].t, 1e-5f * std::max(1.0f, expected[i].t)) << "ray " << i;
+    }
+    EXPECT_EQ(occluded_flags(*engine, rays), expected_occluded);
   }
 }
 
-TEST(QueryEngine, ABudgetBelowTheSceneBuildsEmbreeBricksAtLowQualityUnlessTheUserChose) {
+// Under a budget that cannot hold the scene the bricks are built at the
+// quality of an unlimited budget, so every answer is bitwise the same,
+// those of rays along edges in their axis plane included.
+TEST(QueryEngine, ABudgetBelowTheSceneKeepsTheBuildQualityAndEveryAnswer) {
   const auto scene = pack({"gen:city?of=(gen:sphere?level=3)&copies=12"}, 300);
   auto roomy = engine_with_quality(*scene, uint64_t{1} << 30, "");
   EXPECT_TRUE(roomy->cache_fits_scene());
   EXPECT_FALSE(roomy->accel_options().contains("quality"));
   const uint64_t tight = total_reservation(*roomy) / 4;
-  auto low = engine_with_quality(*scene, tight, "");
-  EXPECT_FALSE(low->cache_fits_scene());
-  EXPECT_EQ(low->accel_options().at("quality"), "low");
-  auto chosen = engine_with_quality(*scene, tight, "medium");
-  EXPECT_EQ(chosen->accel_options().at("quality"), "medium");
-  // And the answers agree.
-  const auto rays = mixed_rays(scene->bounds, 3000, 32);
-  EXPECT_TRUE(bitwise_equal(intersect(*low, rays), intersect(*roomy, rays)));
+  auto budgeted = engine_with_quality(*scene, tight, "");
+  EXPECT_FALSE(budgeted->cache_fits_scene());
+  EXPECT_FALSE(budgeted->accel_options().contains("quality"));
+  auto chosen = engine_with_quality(*scene, tight, "low");
+  EXPECT_EQ(chosen->accel_options().at("quality"), "low");
+  std::vector<Ray> rays = mixed_rays(scene->bounds, 3000, 32);
+  const std::vector<Ray> in_plane = axis_plane_rays(scene->bounds);
+  rays.insert(rays.end(), in_plane.begin(), in_plane.end());
+  EXPECT_TRUE(bitwise_equal(intersect(*budgeted, rays), intersect(*roomy, rays)));
 }
 
 TEST(QueryEngine, ReorderingLoadsEachBrickFewerTimesThanRayOrder) {

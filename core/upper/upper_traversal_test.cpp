@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -127,6 +128,78 @@ TEST(UpperTraversal, HierarchyFindsWhatTestingEveryLeafFinds) {
         if (found_a < 4) break;
         after = a[found_a - 1];
         if (r % 3 == 0 && std::isfinite(a[1].entry)) tmax = std::max(a[1].entry, ray.tnear);  // a hit
+      }
+    }
+  }
+}
+
+// A ray running in the plane of a box's face (a zero direction component,
+// either sign, the origin on the plane) lies in the closed box: every walk
+// reports the box's brick, on the lower face and the upper face alike.
+// (Conservative, not exact: a zero direction component constrains nothing
+// at all, since the widening turns an infinite distance into NaN, so boxes
+// beside the plane are reported too.)
+TEST(UpperTraversal, ARayAlongABoxFaceReachesItsBrick) {
+  std::vector<Aabb> boxes;
+  for (int k = 0; k < 12; ++k) {
+    Aabb b;
+    b.extend(Vec3f(float(k % 4), float(k / 4), 0.0f));
+    b.extend(Vec3f(float(k % 4) + 1, float(k / 4) + 1, 1.0f));
+    boxes.push_back(b);
+  }
+  const UpperHierarchy upper = build_upper_hierarchy(boxes);
+  WideUpper wide;
+  make_wide_upper(upper, wide);
+  WideUpper8 wide8;
+  make_wide_upper(upper, wide8);
+  FlatLeaves flat;
+  std::vector<Aabb> few(boxes.begin(), boxes.begin() + 4);
+  const UpperHierarchy small = build_upper_hierarchy(few);
+  ASSERT_TRUE(make_flat_leaves(small, flat));
+  for (const float y : {0.0f, 1.0f, 2.0f, 3.0f}) {
+    for (const float dy : {0.0f, -0.0f}) {
+      for (const float dz : {1.0f, -1.0f}) {
+        SCOPED_TRACE("y " + std::to_string(y) + " dy " + (std::signbit(dy) ? "-0" : "+0") + " dz " +
+                     std::to_string(dz));
+        Ray ray;
+        ray.origin = Vec3f(1.5f, y, dz > 0 ? -1.0f : 2.0f);
+        ray.direction = Vec3f(0.0f, dy, dz);
+        const SlabRay slab(ray);
+        // The boxes x in [1, 2] with y on one of their faces.
+        std::vector<uint32_t> expected;
+        for (uint32_t k = 0; k < boxes.size(); ++k)
+          if (boxes[k].lo.x == 1.0f && boxes[k].lo.y <= y && y <= boxes[k].hi.y) expected.push_back(k);
+        ASSERT_FALSE(expected.empty());
+        // The expected bricks among those found (a window of 16 holds all 12).
+        const auto found_bricks = [&](const std::array<BrickKey, 16>& window, uint32_t found) {
+          EXPECT_LT(found, 16u) << "window full: the check would be incomplete";
+          std::vector<uint32_t> bricks;
+          for (uint32_t k = 0; k < found; ++k) bricks.push_back(window[k].brick);
+          std::vector<uint32_t> kept;
+          for (const uint32_t b : expected)
+            if (std::find(bricks.begin(), bricks.end(), b) != bricks.end()) kept.push_back(b);
+          return kept;
+        };
+        std::array<BrickKey, 16> window{};
+        uint64_t nodes = 0;
+        uint32_t found = next_bricks(upper, slab, ray.tnear, ray.tfar, BrickKey{}, window, nodes);
+        EXPECT_EQ(found_bricks(window, found), expected) << "binary";
+        found = next_bricks_wide(wide, slab, ray.tnear, ray.tfar, BrickKey{}, window, nodes);
+        EXPECT_EQ(found_bricks(window, found), expected) << "4-wide";
+        if (cpu_has_avx()) {
+          found = next_bricks_wide8(wide8, slab, ray.tnear, ray.tfar, BrickKey{}, window, nodes);
+          EXPECT_EQ(found_bricks(window, found), expected) << "8-wide";
+        }
+        if (y <= 1.0f) {
+          found = next_bricks_flat(flat, slab, ray.tnear, ray.tfar, BrickKey{}, window, nodes);
+          std::vector<uint32_t> flat_expected;
+          for (const uint32_t k : expected)
+            if (k < 4) flat_expected.push_back(k);
+          std::vector<uint32_t> flat_found;
+          for (uint32_t k = 0; k < found; ++k) flat_found.push_back(window[k].brick);
+          for (const uint32_t k : flat_expected)
+            EXPECT_NE(std::find(flat_found.begin(), flat_found.end(), k), flat_found.end()) << "flat " << k;
+        }
       }
     }
   }

@@ -1,0 +1,88 @@
+#include "core/accel/embree_brick_set.h"
+
+#include <algorithm>
+#include <string>
+
+#include "core/accel/embree_device.h"
+
+namespace outcore {
+namespace {
+
+// Per instance: Embree's Instance object and its slot in the top-level
+// scene, which Embree allocates without reporting to the memory monitor.
+constexpr uint64_t kUntrackedBytesPerInstance = 512;
+
+}  // namespace
+
+Expected<std::unique_ptr<EmbreeBrickSet>> EmbreeBrickSet::build(
+    std::span<const EmbreeBrickAccel* const> bricks) {
+  OUTCORE_ASSIGN_OR_RETURN(EmbreeDevice * device, EmbreeDevice::instance());
+  std::unique_ptr<EmbreeBrickSet> set(new EmbreeBrickSet());
+  set->bricks_.assign(bricks.begin(), bricks.end());
+  const bool any = std::any_of(bricks.begin(), bricks.end(),
+                               [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; });
+  if (!any) return set;
+  const std::string what = "building the scene over " + std::to_string(bricks.size()) + " resident bricks";
+  // Column-major 3x4: the identity, no translation.
+  static constexpr float kIdentity[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
+  EmbreeDevice::MeasuredSection section(*device, /*allow_parallel=*/false);
+  RTCScene scene = rtcNewScene(device->handle());
+  bool robust = false;
+  uint64_t instances = 0;
+  for (const EmbreeBrickAccel* brick : bricks) {
+    if (scene == nullptr || brick->scene_ == nullptr) continue;
+    robust = robust || brick->config_.robust;
+    RTCGeometry instance = rtcNewGeometry(device->handle(), RTC_GEOMETRY_TYPE_INSTANCE);
+    if (instance == nullptr) break;
+    rtcSetGeometryInstancedScene(instance, brick->scene_);
+    rtcSetGeometryTransform(instance, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, kIdentity);
+    rtcCommitGeometry(instance);
+    rtcAttachGeometry(scene, instance);
+    rtcReleaseGeometry(instance);
+    ++instances;
+  }
+  if (scene != nullptr) {
+    rtcSetSceneFlags(scene, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+    section.commit(scene);
+  }
+  Status status = device->take_error(what);
+  if (status.ok() && scene == nullptr) status = internal_error(what + ": Embree returned null");
+  if (!status.ok()) {
+    if (scene != nullptr) rtcReleaseScene(scene);
+    return status;
+  }
+  RTCBounds bounds;
+  rtcGetSceneBounds(scene, &bounds);
+  const Vec3f lo(bounds.lower_x, bounds.lower_y, bounds.lower_z),
+      hi(bounds.upper_x, bounds.upper_y, bounds.upper_z);
+  const Vec3f extent = hi - lo;
+  set->scene_ = scene;
+  set->max_extent_ = std::max({extent.x, extent.y, extent.z});
+  set->center_ = (lo + hi) * 0.5f;
+  set->memory_bytes_ = static_cast<uint64_t>(std::max<int64_t>(0, section.delta_bytes())) +
+                       instances * kUntrackedBytesPerInstance + EmbreeBrickAccel::kUntrackedBytes;
+  return set;
+}
+
+EmbreeBrickSet::~EmbreeBrickSet() {
+  if (scene_ == nullptr) return;
+  auto device = EmbreeDevice::instance();  // exists: it made scene_
+  EmbreeDevice::MeasuredSection section(**device, /*allow_parallel=*/false);
+  rtcReleaseScene(scene_);
+}
+
+EmbreeBrickAccel::TraceTarget EmbreeBrickSet::target() const {
+  return EmbreeBrickAccel::TraceTarget{scene_, max_extent_, center_, &coherent_rays_};
+}
+
+void EmbreeBrickSet::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
+  if (scene_ == nullptr) return;
+  EmbreeBrickAccel::intersect_in(target(), ray_ids, rays, hits);
+}
+
+void EmbreeBrickSet::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
+  if (scene_ == nullptr) return;
+  EmbreeBrickAccel::occluded_in(target(), ray_ids, rays, occluded);
+}
+
+}  // namespace outcore
