@@ -289,6 +289,47 @@ TEST(WireQueryStats, TheConversionListNamesEveryFieldOfTheMessage) {
   }
 }
 
+// A scene of three bricks, wholly resident: a large enough request goes
+// through the bricks' one Embree scene (rays_in_brick_set on the wire) and
+// answers bitwise as the engine does brick by brick.
+TEST(ServerBrickSet, ALargeRequestOnAResidentSmallSceneGoesThroughTheSetAndAnswersAsBrickByBrick) {
+  TempDir dir;
+  const std::string store = dir.file("three");
+  const SubprocessResult packed = testing::run_outcore(
+      {"pack", "gen:sphere?level=4", "-o", store, "--brick-tris", "2000", "-q", "--no-sync"},
+      std::chrono::milliseconds(120'000));
+  ASSERT_TRUE(packed.succeeded()) << packed.describe();
+  auto engine = QueryEngine::open(store, EngineOptions{});
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  ASSERT_GT((*engine)->store().brick_count(), 1u);
+  ASSERT_LE((*engine)->store().brick_count(), 16u);
+  const std::vector<Ray> r = testing::make_test_rays((*engine)->store().manifest().bounds, 20000, 88);
+  std::vector<Hit> brick_by_brick(r.size());
+  QueryOptions walked;
+  walked.brick_set = false;
+  ASSERT_TRUE((*engine)->intersect(r, brick_by_brick, walked).ok());
+
+  std::string error;
+  auto server = ServerProcess::start(store, {}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto stub =
+      v1::SceneQuery::NewStub(grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  for (int call = 0; call < 2; ++call) {  // cold (bricks built), then warm (all resident)
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+    v1::IntersectResponse response;
+    const grpc::Status status = stub->Intersect(&context, make_request(r), &response);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_TRUE(response.hits() == hit_bytes(brick_by_brick)) << "call " << call;
+    if (call == 1) {
+      EXPECT_EQ(response.stats().rays_in_brick_set(), r.size());
+      EXPECT_EQ(response.stats().brick_visits(), 0u);
+      EXPECT_EQ(response.stats().brick_builds(), 0u);
+    }
+  }
+  EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
+}
+
 // The strongest check of the per-request figures: the same rays on the same
 // store with a fresh cache, once through a fresh server and once through
 // `outcore trace`, give the same counts. Both run one engine thread: how a

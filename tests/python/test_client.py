@@ -269,7 +269,8 @@ SUBTREE_COUNTS = ("subtree_loads", "subtree_writes", "subtree_rejects", "subtree
 # last_stats as in `outcore trace --stats-json`.
 ENGINE_COUNTS = ("rays", "rays_hit", "invalid_rays", "upper_nodes_visited", "brick_visits", "proxy_tests",
                  "bricks_skipped_by_proxy", "rays_traced_ahead", "brick_acquisitions", "cache_hits",
-                 "cache_misses", "brick_builds", "evictions", "subtree_loads", "subtree_writes")
+                 "cache_misses", "brick_builds", "evictions", "subtree_loads", "subtree_writes",
+                 "rays_in_brick_set")
 
 
 def test_last_stats_equal_traces_for_the_same_rays_on_a_fresh_cache(store, bounds, tmp_path):

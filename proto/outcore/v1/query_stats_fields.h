@@ -36,5 +36,6 @@
   X(seconds_brick)                  \
   X(seconds_proxy)                  \
   X(seconds_brick_builds)           \
-  X(seconds_subtree_loads)
+  X(seconds_subtree_loads)          \
+  X(rays_in_brick_set)
 // clang-format on
