@@ -141,6 +141,7 @@ Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v
     proxy_tests_.fetch_add(stats->proxy_tests, std::memory_order_relaxed);
     bricks_skipped_by_proxy_.fetch_add(stats->bricks_skipped_by_proxy, std::memory_order_relaxed);
     rays_traced_ahead_.fetch_add(stats->rays_traced_ahead, std::memory_order_relaxed);
+    rays_in_brick_set_.fetch_add(stats->rays_in_brick_set, std::memory_order_relaxed);
   }
   return status;
 }
@@ -394,6 +395,7 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   response->set_proxy_tests(c.proxy_tests);
   response->set_bricks_skipped_by_proxy(c.bricks_skipped_by_proxy);
   response->set_rays_traced_ahead(c.rays_traced_ahead);
+  response->set_rays_in_brick_set(c.rays_in_brick_set);
   const CacheCounters cache = engine_.cache().counters();
   response->set_cache_hits(cache.hits);
   response->set_cache_misses(cache.misses);
@@ -438,6 +440,7 @@ ServiceCounters SceneQueryService::counters() const {
   c.proxy_tests = proxy_tests_.load(std::memory_order_relaxed);
   c.bricks_skipped_by_proxy = bricks_skipped_by_proxy_.load(std::memory_order_relaxed);
   c.rays_traced_ahead = rays_traced_ahead_.load(std::memory_order_relaxed);
+  c.rays_in_brick_set = rays_in_brick_set_.load(std::memory_order_relaxed);
   return c;
 }
 

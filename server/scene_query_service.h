@@ -71,6 +71,7 @@ struct ServiceCounters {
   uint64_t proxy_tests = 0;
   uint64_t bricks_skipped_by_proxy = 0;
   uint64_t rays_traced_ahead = 0;
+  uint64_t rays_in_brick_set = 0;
 };
 
 class SceneQueryService final : public v1::SceneQuery::Service {
@@ -138,6 +139,7 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   std::atomic<uint64_t> proxy_tests_{0};
   std::atomic<uint64_t> bricks_skipped_by_proxy_{0};
   std::atomic<uint64_t> rays_traced_ahead_{0};
+  std::atomic<uint64_t> rays_in_brick_set_{0};
 };
 
 }  // namespace outcore::server

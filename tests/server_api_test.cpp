@@ -327,6 +327,10 @@ TEST(ServerBrickSet, ALargeRequestOnAResidentSmallSceneGoesThroughTheSetAndAnswe
       EXPECT_EQ(response.stats().brick_builds(), 0u);
     }
   }
+  grpc::ClientContext stats_context;
+  v1::ServerStats totals;
+  ASSERT_TRUE(stub->GetStats(&stats_context, v1::GetStatsRequest(), &totals).ok());
+  EXPECT_EQ(totals.rays_in_brick_set(), r.size()) << "the warm call's rays, summed by the server";
   EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
 }
 

@@ -205,7 +205,8 @@ class SceneClient:
         brick cache's (cache_hits, cache_misses, brick_builds, evictions,
         resident_bytes, peak_resident_bytes, cache_budget_bytes, ...); sums
         over the requests of brick_visits, proxy_tests,
-        bricks_skipped_by_proxy and rays_traced_ahead; proxy_bytes; and the
+        bricks_skipped_by_proxy, rays_traced_ahead and rays_in_brick_set;
+        proxy_bytes; and the
         subtree tier's (subtree_dir, "" without one, subtree_loads,
         subtree_writes, subtree_rejects, subtree_bytes_read,
         subtree_bytes_written, subtree_load_seconds, subtree_files,
