@@ -19,21 +19,25 @@ Expected<std::unique_ptr<EmbreeBrickSet>> EmbreeBrickSet::build(
   OUTCORE_ASSIGN_OR_RETURN(EmbreeDevice * device, EmbreeDevice::instance());
   std::unique_ptr<EmbreeBrickSet> set(new EmbreeBrickSet());
   set->bricks_.assign(bricks.begin(), bricks.end());
-  const bool any = std::any_of(bricks.begin(), bricks.end(),
-                               [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; });
-  if (!any) return set;
+  const auto with_scene = static_cast<uint64_t>(std::count_if(
+      bricks.begin(), bricks.end(), [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; }));
+  if (with_scene == 0) return set;
   const std::string what = "building the scene over " + std::to_string(bricks.size()) + " resident bricks";
   // Column-major 3x4: the identity, no translation.
   static constexpr float kIdentity[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
   EmbreeDevice::MeasuredSection section(*device, /*allow_parallel=*/false);
   RTCScene scene = rtcNewScene(device->handle());
+  if (scene == nullptr) {
+    const Status status = device->take_error(what);
+    return status.ok() ? internal_error(what + ": Embree returned null") : status;
+  }
   bool robust = false;
   uint64_t instances = 0;
   for (const EmbreeBrickAccel* brick : bricks) {
-    if (scene == nullptr || brick->scene_ == nullptr) continue;
+    if (brick->scene_ == nullptr) continue;
     robust = robust || brick->config_.robust;
     RTCGeometry instance = rtcNewGeometry(device->handle(), RTC_GEOMETRY_TYPE_INSTANCE);
-    if (instance == nullptr) break;
+    if (instance == nullptr) break;  // the device's error is taken below
     rtcSetGeometryInstancedScene(instance, brick->scene_);
     rtcSetGeometryTransform(instance, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, kIdentity);
     rtcCommitGeometry(instance);
@@ -41,14 +45,14 @@ Expected<std::unique_ptr<EmbreeBrickSet>> EmbreeBrickSet::build(
     rtcReleaseGeometry(instance);
     ++instances;
   }
-  if (scene != nullptr) {
-    rtcSetSceneFlags(scene, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
-    section.commit(scene);
-  }
+  rtcSetSceneFlags(scene, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
+  section.commit(scene);
   Status status = device->take_error(what);
-  if (status.ok() && scene == nullptr) status = internal_error(what + ": Embree returned null");
+  // A brick left out would lose its hits: never a partial set.
+  if (status.ok() && instances != with_scene)
+    status = internal_error(what + ": Embree returned a null instance");
   if (!status.ok()) {
-    if (scene != nullptr) rtcReleaseScene(scene);
+    rtcReleaseScene(scene);
     return status;
   }
   RTCBounds bounds;

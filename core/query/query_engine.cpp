@@ -320,8 +320,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const bool validate_apart = !options.reorder || options.strict;
   // Grown only (new elements are value-initialised once); every element
   // below n is overwritten below, in parallel.
-  if ((!(sweep || in_set) || validate_apart) && scratch->valid.size() < n) scratch->valid.resize(n);
-  if (!(sweep || in_set) && scratch->progress.size() < n) scratch->progress.resize(n);
+  // The set and the sweep take chunks of consecutive rays with their own
+  // per-ray state: no flags or progress records for the whole batch.
+  const bool chunked = sweep || in_set;
+  if ((!chunked || validate_apart) && scratch->valid.size() < n) scratch->valid.resize(n);
+  if (!chunked && scratch->progress.size() < n) scratch->progress.resize(n);
   std::vector<uint8_t>& valid = scratch->valid;
   std::vector<RayProgress>& progress = scratch->progress;
   const FlatLeaves& flat = upper_walks_->flat;
@@ -353,6 +356,15 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   auto reset_and_check = [&](std::size_t i) {
     reset_answer(i);
     return ray_problem(rays[i]) == nullptr;
+  };
+  // In the chunked paths: whether ray i is to be traced. Validated apart, its
+  // flag says; otherwise it is reset and checked here, and counted in
+  // `invalid` when it is bad.
+  auto chunk_ray_valid = [&](std::size_t i, uint64_t& invalid) {
+    if (validate_apart) return valid[i] != 0;
+    if (reset_and_check(i)) return true;
+    ++invalid;
+    return false;
   };
 
   // Validation and reset of the outputs and per-ray progress, in parallel
@@ -573,13 +585,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       std::size_t count = 0;
       uint64_t invalid = 0;
       for (std::size_t i = base; i < base + size; ++i) {
-        if (validate_apart) {
-          if (!valid[i]) continue;
-        } else if (!reset_and_check(i)) {
-          ++invalid;
-          continue;
-        }
-        ids[count++] = static_cast<uint32_t>(i);
+        if (chunk_ray_valid(i, invalid)) ids[count++] = static_cast<uint32_t>(i);
       }
       const std::span<const uint32_t> traced(ids.data(), count);
       if constexpr (kKind == QueryKind::kClosestHit) {
@@ -644,12 +650,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       const std::size_t size = std::min(n - base, kSweepRays);
       std::size_t active = 0;
       for (std::size_t k = 0; k < size; ++k) {
-        if (validate_apart) {
-          if (!valid[base + k]) continue;
-        } else if (!reset_and_check(base + k)) {
-          ++task.invalid;
-          continue;
-        }
+        if (!chunk_ray_valid(base + k, task.invalid)) continue;
         local.progress[k] = RayProgress{};
         const uint32_t brick = advance_with(local.progress[k], base + k, task.counters);
         if (brick == kInvalidId) continue;
