@@ -68,6 +68,21 @@ std::vector<Hit> intersect(QueryEngine& engine, const std::vector<Ray>& rays, Qu
   return hits;
 }
 
+// The batch traced in a shuffled order (seeded), its hits mapped back to
+// input order.
+std::vector<Hit> intersect_shuffled(QueryEngine& engine, const std::vector<Ray>& rays,
+                                    const QueryOptions& options, uint64_t seed) {
+  std::vector<std::size_t> order(rays.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::shuffle(order.begin(), order.end(), std::mt19937_64(seed));
+  std::vector<Ray> shuffled(rays.size());
+  for (std::size_t i = 0; i < order.size(); ++i) shuffled[i] = rays[order[i]];
+  const std::vector<Hit> shuffled_hits = intersect(engine, shuffled, options);
+  std::vector<Hit> unshuffled(rays.size());
+  for (std::size_t i = 0; i < order.size(); ++i) unshuffled[order[i]] = shuffled_hits[i];
+  return unshuffled;
+}
+
 bool bitwise_equal(const std::vector<Hit>& a, const std::vector<Hit>& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(Hit)) == 0;
 }
@@ -170,14 +185,7 @@ TEST(QueryEngine, AnswersAreBitwiseIdenticalAcrossBudgetsReorderingThreadsShuffl
     EXPECT_TRUE(bitwise_equal(intersect(*engine, rays), expected)) << threads << " threads";
   }
   // Shuffled, then mapped back to input order.
-  std::vector<std::size_t> order(rays.size());
-  for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::shuffle(order.begin(), order.end(), std::mt19937_64(5));
-  std::vector<Ray> shuffled(rays.size());
-  for (std::size_t i = 0; i < order.size(); ++i) shuffled[i] = rays[order[i]];
-  const auto shuffled_hits = intersect(*unlimited, shuffled);
-  std::vector<Hit> unshuffled(rays.size());
-  for (std::size_t i = 0; i < order.size(); ++i) unshuffled[order[i]] = shuffled_hits[i];
+  const std::vector<Hit> unshuffled = intersect_shuffled(*unlimited, rays, {}, 5);
   EXPECT_TRUE(bitwise_equal(unshuffled, expected));
   // Split into uneven batches.
   std::vector<Hit> joined;
@@ -264,6 +272,20 @@ std::vector<Ray> axis_plane_rays(const Aabb& box) {
   return rays;
 }
 
+// mixed_rays, then 64 x 64 camera rays, then the axis-plane rays; `generic`
+// is set to the count before the axis-plane rays (the rays in general
+// position).
+std::vector<Ray> mixed_camera_and_in_plane_rays(const Aabb& box, std::size_t mixed, uint64_t seed,
+                                                std::size_t& generic) {
+  std::vector<Ray> rays = mixed_rays(box, mixed, seed);
+  const std::vector<Ray> camera = camera_rays(box, 64);
+  rays.insert(rays.end(), camera.begin(), camera.end());
+  generic = rays.size();
+  const std::vector<Ray> in_plane = axis_plane_rays(box);
+  rays.insert(rays.end(), in_plane.begin(), in_plane.end());
+  return rays;
+}
+
 // Duplicated triangles under camera rays: in a batch the rays go as coherent
 // packets, shuffled or one by one as single rays, split into uneven batches
 // as packets of other compositions. Every hit is a tie between the copies,
@@ -286,14 +308,7 @@ TEST(QueryEngine, DuplicatedGeometryUnderCoherentRaysIsBatchIndependent) {
     QueryOptions serial;
     serial.reorder = false;
     EXPECT_TRUE(bitwise_equal(intersect(*unlimited, rays, serial), expected)) << "one by one";
-    std::vector<std::size_t> order(rays.size());
-    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::shuffle(order.begin(), order.end(), std::mt19937_64(11));
-    std::vector<Ray> shuffled(rays.size());
-    for (std::size_t i = 0; i < order.size(); ++i) shuffled[i] = rays[order[i]];
-    const auto shuffled_hits = intersect(*unlimited, shuffled);
-    std::vector<Hit> unshuffled(rays.size());
-    for (std::size_t i = 0; i < order.size(); ++i) unshuffled[order[i]] = shuffled_hits[i];
+    const std::vector<Hit> unshuffled = intersect_shuffled(*unlimited, rays, {}, 11);
     EXPECT_TRUE(bitwise_equal(unshuffled, expected)) << "shuffled";
     std::vector<Hit> joined;
     for (std::size_t begin = 0; begin < rays.size();) {
@@ -527,12 +542,8 @@ TEST(QueryEngine, ResidentBrickSetAnswersBitwiseAsBrickByBrick) {
     const uint32_t bricks = engine->store().brick_count();
     ASSERT_GT(bricks, 1u);
     ASSERT_LE(bricks, 16u);
-    std::vector<Ray> rays = mixed_rays(scene->bounds, 3000, 77);
-    const std::vector<Ray> camera = camera_rays(scene->bounds, 64);
-    rays.insert(rays.end(), camera.begin(), camera.end());
-    const std::size_t generic = rays.size();
-    const std::vector<Ray> in_plane = axis_plane_rays(scene->bounds);
-    rays.insert(rays.end(), in_plane.begin(), in_plane.end());
+    std::size_t generic = 0;
+    std::vector<Ray> rays = mixed_camera_and_in_plane_rays(scene->bounds, 3000, 77, generic);
     rays[5].direction = {0, 0, 0};
     rays[2999].tnear = 2.0f;
     rays[2999].tfar = 1.0f;
@@ -572,14 +583,7 @@ TEST(QueryEngine, ResidentBrickSetAnswersBitwiseAsBrickByBrick) {
       tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
       EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, in_set), expected)) << threads << " threads";
     }
-    std::vector<std::size_t> order(rays.size());
-    for (std::size_t i = 0; i < order.size(); ++i) order[i] = i;
-    std::shuffle(order.begin(), order.end(), std::mt19937_64(5));
-    std::vector<Ray> shuffled(rays.size());
-    for (std::size_t i = 0; i < order.size(); ++i) shuffled[i] = rays[order[i]];
-    const auto shuffled_hits = intersect(*engine, shuffled, in_set);
-    std::vector<Hit> unshuffled(rays.size());
-    for (std::size_t i = 0; i < order.size(); ++i) unshuffled[order[i]] = shuffled_hits[i];
+    const std::vector<Hit> unshuffled = intersect_shuffled(*engine, rays, in_set, 5);
     EXPECT_TRUE(bitwise_equal(unshuffled, expected)) << "shuffled";
 
     // Any hit.
@@ -720,12 +724,8 @@ std::unique_ptr<QueryEngine> engine_with_quality(const PackedScene& scene, uint6
 // other side of that edge.
 TEST(QueryEngine, EmbreeBuildQualityChangesAnAnswerOnlyAtAnEdgeInTheRaysAxisPlane) {
   const auto scene = pack({"gen:sphere?level=4", "gen:sphere?level=4", "gen:torus?cx=1.5"}, 400);
-  std::vector<Ray> rays = mixed_rays(scene->bounds, 4000, 31);
-  const std::vector<Ray> camera = camera_rays(scene->bounds, 64);
-  rays.insert(rays.end(), camera.begin(), camera.end());
-  const std::size_t generic = rays.size();
-  const std::vector<Ray> in_plane = axis_plane_rays(scene->bounds);
-  rays.insert(rays.end(), in_plane.begin(), in_plane.end());
+  std::size_t generic = 0;
+  const std::vector<Ray> rays = mixed_camera_and_in_plane_rays(scene->bounds, 4000, 31, generic);
   auto medium = engine_with_quality(*scene, uint64_t{1} << 30, "medium");
   const std::vector<Hit> expected = intersect(*medium, rays);
   const std::vector<uint8_t> expected_occluded = occluded_flags(*medium, rays);
