@@ -9,12 +9,15 @@ For each scene and ray set (1M incoherent, 1M camera; bench/make_rays.py):
 - `outcore serve STORE --listen 127.0.0.1:0 --threads 2 --cache-mb 8192` is
   started, and one warm-up query builds every brick the rays need;
 - C++ client: median wall time of the calls of `outcore query --repeat R`
-  (client chunking and the wire included, .npy file I/O excluded);
-- Python client: median wall time of R cast_rays calls (numpy in and out);
+  (client chunking and the wire included, .npy file I/O excluded), once with
+  the rays and hits in the gRPC messages (`--no-shared-memory`) and once
+  through a same-host shared payload (the default against a loopback server);
+- Python client: median wall time of R cast_rays calls (numpy in and out),
+  likewise with shared_memory=False and with the default;
 - in process: median of the warm runs of `outcore trace --repeat R+1`;
 - Open3D: median of R cast_rays runs on the triangles read back from the store.
-The CLI's hits file is compared bitwise with trace's, and Python's arrays with
-it. Ratios are against Open3D in process (> 1: faster than Open3D).
+The CLI's hits files (both paths) are compared bitwise with trace's, and
+Python's arrays with it. Ratios are against Open3D in process (> 1: faster than Open3D).
 
 Latency (bunny server, Python client, one channel, sequential): p50/p99 of
 --latency-calls calls each of 1 and 1,000 rays. Bytes on the wire: the
@@ -72,8 +75,9 @@ class Server:
             sys.exit(f"outcore serve exited {code} on SIGTERM")
 
 
-def cpp_query(address, rays_path, out, runs):
-    text = run([OUTCORE, "query", "--server", address, "--rays", rays_path, "-o", out, "--repeat", str(runs)])
+def cpp_query(address, rays_path, out, runs, shared):
+    extra = [] if shared else ["--no-shared-memory"]
+    text = run([OUTCORE, "query", "--server", address, "--rays", rays_path, "-o", out, "--repeat", str(runs)] + extra)
     secs = [float(m) for m in re.findall(r"call \d+/\d+ seconds (\S+)", text)]
     return statistics.median(secs)
 
@@ -86,6 +90,15 @@ def trace_warm(store, rays_path, out, runs):
     with open(stats_path) as f:
         stats = json.load(f)
     return statistics.median(s["seconds"]["total"] for s in stats[1:])
+
+
+def python_cast(client, rays, runs):
+    times, result = [], None
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        result = client.cast_rays(rays)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times), result
 
 
 def latency(client, rays, calls):
@@ -133,7 +146,8 @@ def main():
         tris, _ = read_store_triangles(store)
         server = Server(store)
         try:
-            with outcore.SceneClient(server.address, timeout=3600) as client:
+            with outcore.SceneClient(server.address, timeout=3600) as client, \
+                    outcore.SceneClient(server.address, timeout=3600, shared_memory=False) as bytes_client:
                 for kind in ("incoherent", "camera"):
                     rays_path = os.path.join(a.work, f"{name}-{kind}.npy")
                     run([sys.executable, os.path.join(ROOT, "bench", "make_rays.py"), info, kind, str(a.rays),
@@ -142,41 +156,51 @@ def main():
                     n = len(rays)
                     cli_out = os.path.join(a.work, f"{name}-{kind}-query.npy")
                     trace_out = os.path.join(a.work, f"{name}-{kind}-trace.npy")
+                    shm_out = os.path.join(a.work, f"{name}-{kind}-query-shm.npy")
                     run([OUTCORE, "query", "--server", server.address, "--rays", rays_path, "-o", cli_out])  # warm-up
-                    cpp_s = cpp_query(server.address, rays_path, cli_out, a.runs)
-                    py_times, result = [], None
-                    for _ in range(a.runs):
-                        t0 = time.perf_counter()
-                        result = client.cast_rays(rays)
-                        py_times.append(time.perf_counter() - t0)
-                    py_s = statistics.median(py_times)
+                    cpp_s = cpp_query(server.address, rays_path, cli_out, a.runs, shared=False)
+                    cpp_shm_s = cpp_query(server.address, rays_path, shm_out, a.runs, shared=True)
+                    py_s, result = python_cast(bytes_client, rays, a.runs)
+                    py_shm_s, result_shm = python_cast(client, rays, a.runs)
+                    if not client.last_call_shared:
+                        sys.exit("the Python client did not use shared memory against a loopback server")
                     trace_s = trace_warm(store, rays_path, trace_out, a.runs)
                     o3d_s = open3d_cast(tris, rays, a.runs)[0]
-                    same_cli = open(cli_out, "rb").read() == open(trace_out, "rb").read()
+                    trace_bytes = open(trace_out, "rb").read()
+                    same_cli = (open(cli_out, "rb").read() == trace_bytes and
+                                open(shm_out, "rb").read() == trace_bytes)
                     ref = np.load(trace_out)
-                    same_py = (np.array_equal(ref["primitive_id"], result["primitive_ids"]) and
-                               np.array_equal(ref["t_hit"].view(np.uint32), result["t_hit"].view(np.uint32)))
+                    same_py = all(np.array_equal(ref["primitive_id"], r["primitive_ids"]) and
+                                  np.array_equal(ref["t_hit"].view(np.uint32), r["t_hit"].view(np.uint32))
+                                  for r in (result, result_shm))
                     row = dict(scene=name, triangles=len(tris), rays=kind, cpp_Mrays=n / cpp_s / 1e6,
-                               python_Mrays=n / py_s / 1e6, trace_Mrays=n / trace_s / 1e6,
+                               cpp_shm_Mrays=n / cpp_shm_s / 1e6, python_Mrays=n / py_s / 1e6,
+                               python_shm_Mrays=n / py_shm_s / 1e6, trace_Mrays=n / trace_s / 1e6,
                                open3d_Mrays=n / o3d_s / 1e6, cpp_vs_open3d=o3d_s / cpp_s,
-                               python_vs_open3d=o3d_s / py_s, cpp_vs_trace=trace_s / cpp_s,
+                               cpp_shm_vs_open3d=o3d_s / cpp_shm_s, python_vs_open3d=o3d_s / py_s,
+                               python_shm_vs_open3d=o3d_s / py_shm_s, cpp_vs_trace=trace_s / cpp_s,
+                               cpp_shm_vs_trace=trace_s / cpp_shm_s,
                                bitwise_cli=same_cli, bitwise_python=same_py, load_avg=os.getloadavg()[0])
                     rows.append(row)
                     print(json.dumps(row), flush=True)
                     if lat is None:
-                        lat = latency(client, rays, a.latency_calls)
-                        wire = wire_bytes(client, rays[:1000])
+                        lat = latency(bytes_client, rays, a.latency_calls)
+                        wire = wire_bytes(bytes_client, rays[:1000])
         finally:
             server.stop()
     print(f"\nload average (1 min) at start {load_before:.1f}, at end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print(f"{a.rays:,}-ray batches, medians of {a.runs} calls, 2 threads everywhere\n")
-    print("| scene | rays | gRPC C++ M rays/s | gRPC Python M rays/s | trace M rays/s | Open3D M rays/s "
-          "| C++ vs Open3D | Python vs Open3D | C++ vs trace | bitwise = trace |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("M rays/s; 'bytes': rays and hits in the gRPC messages (--no-shared-memory / shared_memory=False), "
+          "'shm': same-host shared payloads (the default on loopback); ratios against Open3D in process\n")
+    print("| scene | rays | C++ bytes | C++ shm | Python bytes | Python shm | trace | Open3D "
+          "| C++ bytes vs O3D | C++ shm vs O3D | Py bytes vs O3D | Py shm vs O3D | C++ shm vs trace | bitwise = trace |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['scene']} | {r['rays']} | {r['cpp_Mrays']:.2f} | {r['python_Mrays']:.2f} | {r['trace_Mrays']:.2f} | "
-              f"{r['open3d_Mrays']:.2f} | {r['cpp_vs_open3d']:.2f}x | {r['python_vs_open3d']:.2f}x | "
-              f"{r['cpp_vs_trace']:.2f}x | {'yes' if r['bitwise_cli'] and r['bitwise_python'] else 'NO'} |")
+        print(f"| {r['scene']} | {r['rays']} | {r['cpp_Mrays']:.2f} | {r['cpp_shm_Mrays']:.2f} | "
+              f"{r['python_Mrays']:.2f} | {r['python_shm_Mrays']:.2f} | {r['trace_Mrays']:.2f} | "
+              f"{r['open3d_Mrays']:.2f} | {r['cpp_vs_open3d']:.2f}x | {r['cpp_shm_vs_open3d']:.2f}x | "
+              f"{r['python_vs_open3d']:.2f}x | {r['python_shm_vs_open3d']:.2f}x | {r['cpp_shm_vs_trace']:.2f}x | "
+              f"{'yes' if r['bitwise_cli'] and r['bitwise_python'] else 'NO'} |")
     if lat:
         print(f"\nlatency (Python client, {a.latency_calls} sequential calls, first scene): "
               f"1 ray p50 {lat[1][0]:.2f} ms p99 {lat[1][1]:.2f} ms; "

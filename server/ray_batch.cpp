@@ -20,7 +20,7 @@ uint32_t ray_layout_bytes(int layout) {
   }
 }
 
-Expected<std::span<const Ray>> decode_ray_batch(const v1::RayBatch& batch, std::vector<Ray>& storage) {
+Expected<uint32_t> check_batch_layout(const v1::RayBatch& batch) {
   if (batch.layout_version() != 1) {
     return invalid_argument("batch.layout_version is " + std::to_string(batch.layout_version()) +
                             "; this server reads layout version 1");
@@ -33,6 +33,23 @@ Expected<std::span<const Ray>> decode_ray_batch(const v1::RayBatch& batch, std::
                                  : "the unknown value " + std::to_string(batch.ray_layout())) +
                             "; use RAY_LAYOUT_F32X8 or RAY_LAYOUT_F32X6");
   }
+  return ray_bytes;
+}
+
+void widen_f32x6(const char* rows, uint64_t count, Ray* out) {
+  for (uint64_t i = 0; i < count; ++i) {
+    float row[6];
+    std::memcpy(row, rows + i * 24, sizeof row);
+    Ray& ray = out[i];
+    ray.origin = Vec3f(row[0], row[1], row[2]);
+    ray.direction = Vec3f(row[3], row[4], row[5]);
+    ray.tnear = 0.0f;
+    ray.tfar = std::numeric_limits<float>::infinity();
+  }
+}
+
+Expected<std::span<const Ray>> decode_ray_batch(const v1::RayBatch& batch, std::vector<Ray>& storage) {
+  OUTCORE_ASSIGN_OR_RETURN(const uint32_t ray_bytes, check_batch_layout(batch));
   const std::string& bytes = batch.rays();
   const char* layout_name = ray_bytes == 32 ? "RAY_LAYOUT_F32X8" : "RAY_LAYOUT_F32X6";
   if (bytes.size() % ray_bytes != 0) {
@@ -58,20 +75,12 @@ Expected<std::span<const Ray>> decode_ray_batch(const v1::RayBatch& batch, std::
     return std::span<const Ray>(storage);
   }
   storage.resize(count);
-  for (uint64_t i = 0; i < count; ++i) {
-    float row[6];
-    std::memcpy(row, bytes.data() + i * 24, sizeof row);
-    Ray& ray = storage[i];
-    ray.origin = Vec3f(row[0], row[1], row[2]);
-    ray.direction = Vec3f(row[3], row[4], row[5]);
-    ray.tnear = 0.0f;
-    ray.tfar = std::numeric_limits<float>::infinity();
-  }
+  widen_f32x6(bytes.data(), count, storage.data());
   return std::span<const Ray>(storage);
 }
 
 std::string ray_name(const BatchPosition& position, uint64_t index_in_batch) {
-  if (!position.streamed) return "ray " + std::to_string(index_in_batch);
+  if (!position.streamed) return "ray " + std::to_string(position.first_ray + index_in_batch);
   return "ray " + std::to_string(position.first_ray + index_in_batch) + " (chunk " +
          std::to_string(position.chunk) + ", ray " + std::to_string(index_in_batch) + " of the chunk)";
 }

@@ -20,7 +20,8 @@
 
 namespace outcore::server {
 
-// Where a batch sits in its call: a unary call is one batch; a stream's chunk
+// Where a batch sits in its call: a unary call is one batch (a shared one
+// may be traced in groups, each starting at `first_ray`); a stream's chunk
 // `chunk` (0-based, in arrival order) starts at global ray `first_ray`.
 struct BatchPosition {
   bool streamed = false;
@@ -30,6 +31,14 @@ struct BatchPosition {
 
 // Bytes per ray of a layout, 0 for RAY_LAYOUT_UNSPECIFIED and unknown values.
 uint32_t ray_layout_bytes(int layout);
+
+// Checks layout_version and ray_layout (INVALID_ARGUMENT naming the field);
+// the layout's bytes per ray.
+Expected<uint32_t> check_batch_layout(const v1::RayBatch& batch);
+
+// Widens `count` F32X6 rows (24 bytes each, any alignment) into rays with
+// tnear = 0 and tfar = +inf.
+void widen_f32x6(const char* rows, uint64_t count, Ray* out);
 
 // Checks layout_version, ray_layout, that rays is a whole number of rays and
 // that ray_count agrees; INVALID_ARGUMENT naming the field otherwise. The rays

@@ -7,7 +7,9 @@
 #include <vector>
 
 #include "proto/outcore/v1/query_stats_fields.h"
+#include "proto/outcore/v1/shared_payload_wire.h"
 #include "server/grpc_status.h"
+#include "server/shared_payload.h"
 #include "server/stream_pipeline.h"
 
 namespace outcore::server {
@@ -47,6 +49,13 @@ void fill_stats(const QueryStats& stats, v1::QueryStats* out) {
 #undef OUTCORE_SET_WIRE_FIELD
 }
 
+// Adds the engine's figures to the wire's (a shared call traced in groups).
+void add_stats(const QueryStats& stats, v1::QueryStats* out) {
+#define OUTCORE_ADD_WIRE_FIELD(name) out->set_##name(out->name() + stats.name);
+  OUTCORE_WIRE_QUERY_STATS(OUTCORE_ADD_WIRE_FIELD)
+#undef OUTCORE_ADD_WIRE_FIELD
+}
+
 #define OUTCORE_RETURN_IF_GRPC_ERROR(expr) \
   do {                                     \
     const grpc::Status _status = (expr);   \
@@ -83,6 +92,10 @@ template <QueryKind kKind>
 Expected<std::span<const Ray>> SceneQueryService::check_request(const v1::QueryRequest& request,
                                                                 const BatchPosition& position,
                                                                 std::vector<Ray>& storage) const {
+  if (request.has_shared()) {
+    return invalid_argument(where(position) +
+                            ": shared payloads are for the unary calls (Intersect, Occluded), not streams");
+  }
   auto rays = decode_ray_batch(request.batch(), storage);
   if (!rays.ok()) return rays.status().with_context(where(position));
   const uint64_t n = rays->size();
@@ -150,6 +163,7 @@ template <QueryKind kKind, class Response>
 grpc::Status SceneQueryService::answer(grpc::ServerContext* context, const v1::QueryRequest& request,
                                        Response* response) {
   using Traits = KindTraits<kKind>;
+  if (request.has_shared()) return answer_shared<kKind>(context, request, response);
   const BatchPosition position;
   std::vector<Ray> widened;
   auto rays = check_request<kKind>(request, position, widened);
@@ -169,6 +183,80 @@ grpc::Status SceneQueryService::answer(grpc::ServerContext* context, const v1::Q
   response->set_sequence(request.sequence());
   fill_stats(stats, response->mutable_stats());
   return grpc::Status::OK;
+}
+
+template <QueryKind kKind, class Response>
+grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, const v1::QueryRequest& request,
+                                              Response* response) {
+  using Traits = KindTraits<kKind>;
+  const auto refuse = [&](const std::string& why) {
+    // The marker tells clients "send bytes from now on" apart from a failed call.
+    context->AddTrailingMetadata(wire::kSharedRefusedKey, wire::kSharedRefusedValue);
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, why + "; send the rays in batch.rays");
+  };
+  if (!options_.shared_payloads) return refuse("this server runs with --no-shared-payloads");
+  if (!is_loopback_peer(context->peer())) {
+    return refuse("shared payloads are accepted from loopback peers only, not from " + context->peer());
+  }
+  auto object = open_shared_payload(request, Traits::kReplyBytesPerRay);
+  if (!object.ok()) {
+    if (object.status().code() == StatusCode::kFailedPrecondition) return refuse(object.status().message());
+    return to_grpc_status(object.status().with_context("request"));
+  }
+  const uint64_t n = request.batch().ray_count();
+  OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n));
+  const SharedBuffersLease buffers = take_shared_buffers();
+  v1::QueryStats* wire_stats = response->mutable_stats();
+  // Groups in order, so under strict mode the first bad ray found is the
+  // call's first (earlier groups had none).
+  for (uint64_t first = 0; first < n || first == 0; first += kSharedGroupRays) {
+    const uint64_t count = std::min(kSharedGroupRays, n - first);
+    if (first > 0) OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n - first));
+    const Status read = read_shared_rays(*object, request, first, count, buffers->rays);
+    if (!read.ok()) return to_grpc_status(read.with_context("request"));
+    const std::span<const Ray> rays(buffers->rays.data(), count);
+    BatchPosition position;
+    position.first_ray = first;
+    if (const Status bad = check_rays(rays, position, request.strict()); !bad.ok())
+      return to_grpc_status(bad);
+    const uint64_t answer_bytes = count * Traits::kReplyBytesPerRay;
+    if (buffers->answers.size() < answer_bytes) buffers->answers.resize(answer_bytes);
+    QueryStats stats;
+    const Status status = trace<kKind>(rays, buffers->answers.data(), request, &stats);
+    if (!status.ok()) return to_grpc_status(status);
+    const Status written =
+        write_shared_answers(*object, request.shared(), first * Traits::kReplyBytesPerRay,
+                             std::span<const uint8_t>(buffers->answers.data(), answer_bytes));
+    if (!written.ok()) return to_grpc_status(written.with_context("request"));
+    add_stats(stats, wire_stats);
+    if (n == 0) break;
+  }
+  response->set_layout_version(1);
+  response->set_ray_count(n);
+  response->set_sequence(request.sequence());
+  response->set_answers_in_shared(true);
+  return grpc::Status::OK;
+}
+
+SceneQueryService::SharedBuffersLease SceneQueryService::take_shared_buffers() {
+  std::unique_ptr<SharedBuffers> buffers;
+  {
+    std::lock_guard lock(shared_buffers_mutex_);
+    if (!spare_shared_buffers_.empty()) {
+      buffers = std::move(spare_shared_buffers_.back());
+      spare_shared_buffers_.pop_back();
+    }
+  }
+  if (buffers == nullptr) buffers = std::make_unique<SharedBuffers>();
+  return SharedBuffersLease(buffers.release(), SharedBuffersReturn{this});
+}
+
+void SceneQueryService::SharedBuffersReturn::operator()(SharedBuffers* returned) const {
+  std::unique_ptr<SharedBuffers> buffers(returned);
+  const uint64_t bytes = buffers->rays.capacity() * sizeof(Ray) + buffers->answers.capacity();
+  if (bytes > kKeepSharedBufferBytes) return;
+  std::lock_guard lock(service->shared_buffers_mutex_);
+  if (service->spare_shared_buffers_.size() < 2) service->spare_shared_buffers_.push_back(std::move(buffers));
 }
 
 template <QueryKind kKind, class Response>
@@ -379,6 +467,7 @@ grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext*, const v1::Get
   response->set_cache_budget_bytes(engine_.cache().budget_bytes());
   response->set_server_version(OUTCORE_VERSION);
   response->set_max_message_bytes(options_.max_message_bytes);
+  response->set_shared_payloads(options_.shared_payloads);
   return grpc::Status::OK;
 }
 

@@ -4,6 +4,10 @@
 // (grpc_status.h). F32X8 rays are traced in place in the request's bytes and
 // hits are written straight into the reply's bytes.
 //
+// A unary request may instead carry a shared payload (shared_payload.h): its
+// rays are copied out of the client's shared-memory object and its answers
+// copied into it, accepted from loopback peers only.
+//
 // Deadlines and cancellation are checked before each batch is traced (unary)
 // and between engine calls (streams); a batch already being traced runs to
 // its end. Each stream chunk is answered by one reply, in order, echoing its
@@ -19,6 +23,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -45,7 +50,15 @@ struct ServiceOptions {
   // --stream-gather-ms). Negative: automatic, kGatherWaitOutOfCore when the
   // cache cannot hold the scene, else 0 (no waiting).
   int64_t gather_wait_ms = -1;
+  // Accept SharedPayload requests from loopback peers (the server's
+  // --no-shared-payloads turns this off).
+  bool shared_payloads = true;
 };
+
+// A shared-payload call's ray and answer buffers are kept for the next call
+// when together they hold at most this many bytes (1 M rays take 64 MiB), so
+// repeated batches do not fault fresh pages in; larger ones are freed.
+inline constexpr uint64_t kKeepSharedBufferBytes = uint64_t{160} << 20;
 
 // Under a tight budget a stream's chunks are gathered while they keep coming
 // at most this far apart (loopback chunks of 64 k rays arrive ~5 ms apart).
@@ -102,6 +115,18 @@ class SceneQueryService final : public v1::SceneQuery::Service {
     std::vector<uint8_t> answers;  // operator new's alignment suits Hit
   };
 
+  // A shared-payload call's buffers (see kKeepSharedBufferBytes), handed
+  // back to the service's spares when the lease ends, on every return path.
+  struct SharedBuffers {
+    std::vector<Ray> rays;
+    std::vector<uint8_t> answers;
+  };
+  struct SharedBuffersReturn {
+    SceneQueryService* service;
+    void operator()(SharedBuffers* buffers) const;
+  };
+  using SharedBuffersLease = std::unique_ptr<SharedBuffers, SharedBuffersReturn>;
+
   // The request's rays (in its bytes or widened into `storage`), or the
   // error naming what is wrong: layout, size, reply too large, bad rays.
   template <QueryKind kKind>
@@ -116,6 +141,11 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   Status trace(std::span<const Ray> rays, uint8_t* out, const v1::QueryRequest& request, QueryStats* stats);
   template <QueryKind kKind, class Response>
   grpc::Status answer(grpc::ServerContext* context, const v1::QueryRequest& request, Response* response);
+  // answer() for a request with a shared payload (shared_payload.h).
+  template <QueryKind kKind, class Response>
+  grpc::Status answer_shared(grpc::ServerContext* context, const v1::QueryRequest& request,
+                             Response* response);
+  SharedBuffersLease take_shared_buffers();
   // Answers a stream's group of chunks with one engine call, one reply each.
   template <QueryKind kKind, class Response>
   grpc::Status answer_group(grpc::ServerContext* context, std::span<const std::unique_ptr<StreamChunk>> group,
@@ -140,6 +170,8 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   std::atomic<uint64_t> bricks_skipped_by_proxy_{0};
   std::atomic<uint64_t> rays_traced_ahead_{0};
   std::atomic<uint64_t> rays_in_brick_set_{0};
+  std::mutex shared_buffers_mutex_;
+  std::vector<std::unique_ptr<SharedBuffers>> spare_shared_buffers_;  // at most two
 };
 
 }  // namespace outcore::server

@@ -46,6 +46,7 @@ struct ServeArgs {
   uint32_t max_message_mb = 64;
   int64_t stream_group_rays = 0;  // 0: automatic
   int64_t stream_gather_ms = -1;  // negative: automatic
+  bool no_shared_payloads = false;
   std::string log_level = "info";
 };
 
@@ -142,6 +143,7 @@ int run_serve(const ServeArgs& args) {
   service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
   service_options.max_group_rays = static_cast<uint64_t>(args.stream_group_rays);
   service_options.gather_wait_ms = args.stream_gather_ms;
+  service_options.shared_payloads = !args.no_shared_payloads;
   server::SceneQueryService service(**engine, service_options);
 
   grpc::EnableDefaultHealthCheckService(true);
@@ -223,6 +225,8 @@ void add_serve_command(CLI::App& app, int& exit_code) {
                   "Before tracing, wait for a stream's chunks while they come at most this many ms apart, "
                   "up to --stream-group-rays; -1: 50 when the cache cannot hold the scene, else 0")
       ->capture_default_str();
+  cmd->add_flag("--no-shared-payloads", args->no_shared_payloads,
+                "Refuse shared-memory payloads (same-host clients then send rays and get hits over gRPC)");
   cmd->add_option("--log-level", args->log_level, "Log level")
       ->check(CLI::IsMember({"debug", "info", "warn"}))
       ->capture_default_str();

@@ -230,7 +230,9 @@ TEST_F(ServerApi, SixteenConcurrentClientsGetTheirSerialAnswers) {
 }
 
 TEST_F(ServerApi, ClientLibraryStreamsBigBatchesAndReportsStats) {
-  auto client = client::SceneClient::connect(server_->address());
+  client::ConnectOptions over_grpc;
+  over_grpc.shared_memory = false;  // what is tested here is the streamed bytes path
+  auto client = client::SceneClient::connect(server_->address(), over_grpc);
   ASSERT_TRUE(client.ok()) << client.status().to_string();
   EXPECT_EQ((*client)->connected_scene().max_message_bytes(), uint64_t{1} << 20);
   EXPECT_LT((*client)->max_chunk_rays(), 40'000u);

@@ -142,10 +142,15 @@ TEST_F(ServerE2e, UnaryAnyHitEqualsTraceBitwise) {
 }
 
 TEST_F(ServerE2e, BatchSeveralTimesTheMaxMessageIsStreamedAndEqualsTrace) {
-  const std::string out = expect_query_equals_trace(*gen_, gen_->big_rays, false);
-  EXPECT_TRUE(contains(out, "messages 4\n")) << out;
-  const std::string any = expect_query_equals_trace(*gen_, gen_->big_rays, true);
-  EXPECT_TRUE(contains(any, "messages 4\n")) << any;
+  const std::string out = expect_query_equals_trace(*gen_, gen_->big_rays, false, {"--no-shared-memory"});
+  EXPECT_TRUE(contains(out, "messages 4\nshared_memory no\n")) << out;
+  const std::string any = expect_query_equals_trace(*gen_, gen_->big_rays, true, {"--no-shared-memory"});
+  EXPECT_TRUE(contains(any, "messages 4\nshared_memory no\n")) << any;
+  // By default, a loopback server takes the batch as one shared-memory call.
+  const std::string shared = expect_query_equals_trace(*gen_, gen_->big_rays, false);
+  EXPECT_TRUE(contains(shared, "messages 1\nshared_memory yes\n")) << shared;
+  const std::string shared_any = expect_query_equals_trace(*gen_, gen_->big_rays, true);
+  EXPECT_TRUE(contains(shared_any, "messages 1\nshared_memory yes\n")) << shared_any;
 }
 
 TEST_F(ServerE2e, UnevenChunksKeepTheirOrder) {
@@ -157,9 +162,9 @@ TEST_F(ServerE2e, UnevenChunksKeepTheirOrder) {
   EXPECT_TRUE(contains(small, "messages 2\n")) << small;
 }
 
-// A batch of more than 262,144 rays is streamed in 65,536-ray chunks by
-// default even when one message would hold it (the wire then overlaps
-// tracing), against a server with the default 64 MiB messages.
+// Over gRPC bytes, a batch of more than 262,144 rays is streamed in
+// 65,536-ray chunks by default even when one message would hold it (the wire
+// then overlaps tracing), against a server with the default 64 MiB messages.
 TEST_F(ServerE2e, LargeBatchesStreamInChunksByDefaultAndEqualTrace) {
   std::string error;
   auto server = ServerProcess::start(gen_->store, {}, error);
@@ -172,8 +177,8 @@ TEST_F(ServerE2e, LargeBatchesStreamInChunksByDefaultAndEqualTrace) {
   const std::string queried = dir_->file("query-large.npy");
   const SubprocessResult t = outcore({"trace", gen_->store, "--rays", rays, "-o", traced});
   ASSERT_TRUE(t.succeeded()) << t.describe();
-  const SubprocessResult q =
-      outcore({"query", "--server", server->address(), "--rays", rays, "-o", queried, "--stats"});
+  const SubprocessResult q = outcore({"query", "--server", server->address(), "--rays", rays, "-o", queried,
+                                      "--stats", "--no-shared-memory"});
   ASSERT_TRUE(q.succeeded()) << q.describe();
   EXPECT_TRUE(contains(q.stdout_text, "messages 5\n")) << q.stdout_text;  // ceil(300001 / 65536)
   EXPECT_TRUE(read_bytes(queried) == read_bytes(traced)) << "query's hits differ from trace's";
@@ -187,9 +192,11 @@ TEST_F(ServerE2e, StrictAndNoReorderGiveTheSameAnswer) {
 TEST_F(ServerE2e, BunnyUnaryAndStreamedEqualTrace) {
   expect_query_equals_trace(*bunny_, bunny_->small_rays, false);
   expect_query_equals_trace(*bunny_, bunny_->small_rays, true);
-  const std::string out = expect_query_equals_trace(*bunny_, bunny_->big_rays, false);
+  const std::string out = expect_query_equals_trace(*bunny_, bunny_->big_rays, false, {"--no-shared-memory"});
   EXPECT_TRUE(contains(out, "messages 4\n")) << out;
-  expect_query_equals_trace(*bunny_, bunny_->big_rays, true);
+  expect_query_equals_trace(*bunny_, bunny_->big_rays, true, {"--no-shared-memory"});
+  const std::string shared = expect_query_equals_trace(*bunny_, bunny_->big_rays, false);
+  EXPECT_TRUE(contains(shared, "shared_memory yes\n")) << shared;
 }
 
 // The line of `outcore trace --stats`-style text that starts with `prefix`,

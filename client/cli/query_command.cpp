@@ -27,6 +27,7 @@ struct QueryArgs {
   bool no_reorder = false;
   uint64_t chunk_rays = 0;
   bool print_stats = false;
+  bool no_shared_memory = false;
   int repeat = 1;
 };
 
@@ -36,6 +37,7 @@ int run_query(const QueryArgs& args) {
   if (!rays.ok()) return report_command_error("query", rays.status().message());
   client::ConnectOptions connect_options;
   if (args.deadline_seconds > 0) connect_options.timeout_seconds = args.deadline_seconds;
+  connect_options.shared_memory = !args.no_shared_memory;
   auto connection = client::SceneClient::connect(args.server, connect_options);
   if (!connection.ok()) return report_command_error("query", connection.status().message());
   client::SceneClient& scene = **connection;
@@ -77,6 +79,7 @@ int run_query(const QueryArgs& args) {
     s.cache_budget_bytes = server->cache_budget_bytes();
     s.proxy_bytes = server->proxy_bytes();
     std::printf("messages %llu\n", static_cast<unsigned long long>(stats.messages));
+    std::printf("shared_memory %s\n", stats.shared ? "yes" : "no");
     std::fputs(s.to_text().c_str(), stdout);
   }
   return 0;
@@ -99,6 +102,9 @@ void add_query_command(CLI::App& app, int& exit_code) {
       "--chunk-rays", args->chunk_rays,
       "Rays per message (default: as many as the server's max message size allows); larger batches "
       "are streamed");
+  cmd->add_flag("--no-shared-memory", args->no_shared_memory,
+                "Send rays and get hits over gRPC even when the server is on this host (default: batches "
+                "of 16,384 rays or more go through shared memory then)");
   cmd->add_flag("--stats", args->print_stats,
                 "Print the engine's figures summed over the replies (as trace --stats)");
   cmd->add_option("--repeat", args->repeat,

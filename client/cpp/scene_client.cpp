@@ -6,9 +6,16 @@
 #include <bit>
 #include <chrono>
 #include <cstring>
+#include <string_view>
 #include <thread>
 
+#include <arpa/inet.h>
+#include <unistd.h>
+
+#include <cctype>
+
 #include "proto/outcore/v1/query_stats_fields.h"
+#include "proto/outcore/v1/shared_payload_wire.h"
 
 namespace outcore::client {
 
@@ -22,6 +29,20 @@ constexpr uint64_t kMessageOverheadBytes = 1024;
 constexpr uint64_t kWireBytesPerRay = 32;
 // Assumed when a server does not report its limit (gRPC's usual default).
 constexpr uint64_t kDefaultMaxMessageBytes = uint64_t{4} << 20;
+// Shared-memory objects kept for reuse once their call is done.
+constexpr std::size_t kSpareObjects = 4;
+// Where the rays start in a shared object (after its header) and where the
+// answers start: after the rays, cache-line aligned.
+constexpr uint64_t kRaysOffset = SharedMemoryObject::kHeaderBytes;
+constexpr uint64_t answers_offset(uint64_t ray_bytes) {
+  return kRaysOffset + (ray_bytes + 63) / 64 * 64;
+}
+// Objects are made a little larger than asked (up to an eighth of the next
+// power of two, whole MiB), so batches that grow slowly reuse one object.
+uint64_t object_size(uint64_t bytes) {
+  const uint64_t step = std::max<uint64_t>(uint64_t{1} << 20, std::bit_ceil(bytes) / 8);
+  return (bytes + step - 1) / step * step;
+}
 
 const char* grpc_code_name(grpc::StatusCode code) {
   switch (code) {
@@ -139,6 +160,7 @@ Status from_grpc_status(const grpc::Status& status, const std::string& context) 
     case grpc::StatusCode::FAILED_PRECONDITION: code = StatusCode::kFailedPrecondition; break;
     case grpc::StatusCode::RESOURCE_EXHAUSTED: code = StatusCode::kResourceExhausted; break;
     case grpc::StatusCode::OUT_OF_RANGE: code = StatusCode::kOutOfRange; break;
+    case grpc::StatusCode::PERMISSION_DENIED: code = StatusCode::kPermissionDenied; break;
     case grpc::StatusCode::CANCELLED:
     case grpc::StatusCode::DEADLINE_EXCEEDED: code = StatusCode::kCancelled; break;
     case grpc::StatusCode::UNAVAILABLE: code = StatusCode::kIoError; break;
@@ -164,6 +186,8 @@ Expected<std::unique_ptr<SceneClient>> SceneClient::connect(const std::string& a
       client->scene_.max_message_bytes() ? client->scene_.max_message_bytes() : kDefaultMaxMessageBytes;
   client->max_chunk_rays_ =
       std::max<uint64_t>(1, (max_message - std::min(max_message, kMessageOverheadBytes)) / kWireBytesPerRay);
+  client->use_shared_ =
+      options.shared_memory && client->scene_.shared_payloads() && is_loopback_target(address);
   return client;
 }
 
@@ -199,11 +223,177 @@ Status SceneClient::occluded(std::span<const Ray> rays, std::span<uint8_t> occlu
   return run<v1::OccludedResponse>(rays, occluded, 1, options, stats);
 }
 
+namespace {
+
+// "host:port", "[v6]:port", "host" or a bare IPv6 address -> the host.
+std::string_view host_of(std::string_view host_port) {
+  if (host_port.starts_with("[")) {
+    const auto end = host_port.find(']');
+    return end == std::string_view::npos ? std::string_view() : host_port.substr(1, end - 1);
+  }
+  if (std::count(host_port.begin(), host_port.end(), ':') == 1)
+    return host_port.substr(0, host_port.find(':'));
+  return host_port;
+}
+
+bool is_loopback_host(std::string_view host) {
+  std::string lower(host);
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (lower.ends_with(".")) lower.pop_back();
+  if (lower == "localhost") return true;
+  in_addr address4{};
+  if (inet_pton(AF_INET, lower.c_str(), &address4) == 1) return (ntohl(address4.s_addr) >> 24) == 127;
+  in6_addr address6{};
+  if (inet_pton(AF_INET6, lower.c_str(), &address6) != 1) return false;
+  if (IN6_IS_ADDR_LOOPBACK(&address6)) return true;
+  return IN6_IS_ADDR_V4MAPPED(&address6) && address6.s6_addr[12] == 127;
+}
+
+}  // namespace
+
+bool is_loopback_target(const std::string& address) {
+  std::string_view target = address;
+  if (target.starts_with("unix:") || target.starts_with("unix-abstract:")) return true;
+  if (target.starts_with("ipv4:") || target.starts_with("ipv6:")) {
+    // A comma-separated list: local only if every address is.
+    target.remove_prefix(5);
+    while (true) {
+      const auto comma = target.find(',');
+      if (!is_loopback_host(host_of(target.substr(0, comma)))) return false;
+      if (comma == std::string_view::npos) return true;
+      target.remove_prefix(comma + 1);
+    }
+  }
+  if (target.starts_with("dns:")) {
+    target.remove_prefix(4);
+    if (target.starts_with("//")) {  // dns://authority/host:port
+      const auto slash = target.find('/', 2);
+      if (slash == std::string_view::npos) return false;
+      target.remove_prefix(slash + 1);
+    }
+  }
+  return is_loopback_host(host_of(target));
+}
+
+Expected<std::unique_ptr<SharedMemoryObject>> SceneClient::take_object(uint64_t bytes) {
+  {
+    std::lock_guard lock(objects_mutex_);
+    // The smallest spare that fits.
+    auto best = spare_objects_.end();
+    for (auto it = spare_objects_.begin(); it != spare_objects_.end(); ++it) {
+      if ((*it)->size() >= bytes && (best == spare_objects_.end() || (*it)->size() < (*best)->size()))
+        best = it;
+    }
+    if (best != spare_objects_.end()) {
+      std::unique_ptr<SharedMemoryObject> object = std::move(*best);
+      spare_objects_.erase(best);
+      return object;
+    }
+  }
+  OUTCORE_ASSIGN_OR_RETURN(SharedMemoryObject created,
+                           SharedMemoryObject::create("cpp-" + std::to_string(getpid()), object_size(bytes)));
+  return std::make_unique<SharedMemoryObject>(std::move(created));
+}
+
+bool SceneClient::shared_refused(const grpc::ClientContext& context) {
+  const auto& trailers = context.GetServerTrailingMetadata();
+  const auto [first, last] = trailers.equal_range(wire::kSharedRefusedKey);
+  return std::any_of(first, last, [](const auto& entry) {
+    return std::string_view(entry.second.data(), entry.second.size()) == wire::kSharedRefusedValue;
+  });
+}
+
+void SceneClient::stop_using_shared() {
+  use_shared_.store(false, std::memory_order_relaxed);
+  std::lock_guard lock(objects_mutex_);
+  spare_objects_.clear();  // unlinks them: /dev/shm is freed now
+}
+
+void SceneClient::give_back_object(std::unique_ptr<SharedMemoryObject> object) {
+  std::lock_guard lock(objects_mutex_);
+  if (spare_objects_.size() < kSpareObjects) {
+    spare_objects_.push_back(std::move(object));
+    return;
+  }
+  // Keep the largest ones.
+  auto smallest = std::min_element(spare_objects_.begin(), spare_objects_.end(),
+                                   [](const auto& a, const auto& b) { return a->size() < b->size(); });
+  if ((*smallest)->size() < object->size()) *smallest = std::move(object);
+}
+
+template <class Response>
+Status SceneClient::run_shared(std::span<const Ray> rays, std::span<uint8_t> out, uint32_t out_bytes_per_ray,
+                               const CallOptions& options, CallStats* stats, bool* send_bytes) {
+  const uint64_t n = rays.size();
+  const uint64_t answers_at = answers_offset(rays.size_bytes());
+  const uint64_t need = answers_at + n * out_bytes_per_ray;
+  if (need >= shared_failed_bytes_.load(std::memory_order_relaxed)) {
+    *send_bytes = true;
+    return Status::Ok();
+  }
+  auto object = take_object(need);
+  if (!object.ok()) {
+    // No room in /dev/shm (a container's is 64 MiB by default): this batch
+    // and larger ones go as bytes; smaller ones still try.
+    uint64_t failed = shared_failed_bytes_.load(std::memory_order_relaxed);
+    while (need < failed && !shared_failed_bytes_.compare_exchange_weak(failed, need)) {
+    }
+    *send_bytes = true;
+    return Status::Ok();
+  }
+  std::memcpy((*object)->data() + kRaysOffset, rays.data(), rays.size_bytes());
+  v1::QueryRequest request;
+  v1::RayBatch* batch = request.mutable_batch();
+  batch->set_layout_version(1);
+  batch->set_ray_layout(v1::RAY_LAYOUT_F32X8);
+  batch->set_ray_count(n);
+  request.set_strict(options.strict);
+  request.set_no_reorder(options.no_reorder);
+  v1::SharedPayload* shared = request.mutable_shared();
+  shared->set_name((*object)->name());
+  shared->set_rays_offset(kRaysOffset);
+  shared->set_answers_offset(answers_at);
+  shared->set_token((*object)->token());
+  grpc::ClientContext context;
+  set_deadline(context, options.deadline_seconds);
+  Response response;
+  const std::string method = method_name(static_cast<const Response*>(nullptr));
+  const grpc::Status status = call_unary(*stub_, &context, request, &response);
+  // After a failed call the server may still be writing answers into the
+  // object: it is not reused (destroying it unlinks it).
+  if (!status.ok()) {
+    if (status.error_code() == grpc::StatusCode::FAILED_PRECONDITION && shared_refused(context)) {
+      stop_using_shared();
+      *send_bytes = true;
+      return Status::Ok();
+    }
+    return from_grpc_status(status, method + " on " + address_);
+  }
+  if (response.layout_version() != 1 || response.ray_count() != n || !response.answers_in_shared() ||
+      !payload(response).empty()) {
+    return internal_error("the server's reply to a shared-memory " + method + " is malformed: layout " +
+                          std::to_string(response.layout_version()) + ", " +
+                          std::to_string(response.ray_count()) + " rays (expected " + std::to_string(n) +
+                          "), answers_in_shared " + (response.answers_in_shared() ? "true" : "false") + ", " +
+                          std::to_string(payload(response).size()) + " payload bytes");
+  }
+  std::memcpy(out.data(), (*object)->data() + answers_at, n * out_bytes_per_ray);
+  give_back_object(std::move(*object));
+  add_stats(response.stats(), stats);
+  if (stats != nullptr) stats->shared = true;
+  return Status::Ok();
+}
+
 template <class Response>
 Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint32_t out_bytes_per_ray,
                         const CallOptions& options, CallStats* stats) {
   const uint64_t n = rays.size();
   if (n == 0) return Status::Ok();
+  if (options.chunk_rays == 0 && n >= kSharedMinRays && use_shared_.load(std::memory_order_relaxed)) {
+    bool send_bytes = false;
+    const Status shared = run_shared<Response>(rays, out, out_bytes_per_ray, options, stats, &send_bytes);
+    if (!send_bytes) return shared;
+  }
   // Batches of more than kStreamAboveRays rays are streamed in chunks even
   // when they would fit one message: the server traces one chunk while the
   // next and the previous reply are on the wire (1 M rays on the bunny:

@@ -6,6 +6,20 @@
 // chunks, written by a second thread while replies are read, so the server
 // traces one chunk while the next is on the wire; answers keep their order.
 //
+// Same host: when the address is a loopback one (127.x, localhost, [::1],
+// unix:) and the server accepts shared payloads (SceneInfo), a batch of at
+// least kSharedMinRays rays with CallOptions::chunk_rays 0 goes as one unary
+// call whose rays and answers sit in a shared-memory object this client owns
+// (core/util/shared_memory.h, proto SharedPayload): one copy in, one copy
+// out, nothing through gRPC or the socket. Objects are pooled and reused
+// across calls (one per concurrent call) and unlinked with the client. If the
+// server refuses (FAILED_PRECONDITION with its "refused" marker: it cannot
+// open the object, another host's /dev/shm, --no-shared-payloads) the client
+// stops using shared memory and sends that batch and later ones over gRPC;
+// if no object can be made (a full /dev/shm), that batch and larger ones go
+// over gRPC. Each object's header holds a random token sent with the call,
+// so that only this client can name its objects.
+//
 // Errors come back as outcore::Status with the gRPC code's name leading the
 // message ("DEADLINE_EXCEEDED: ..."), converted in one place.
 //
@@ -13,13 +27,17 @@
 // (gRPC channels and stubs are thread-safe; calls share no state).
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "core/query/query_engine.h"
 #include "core/query/ray_types.h"
+#include "core/util/shared_memory.h"
 #include "core/util/status.h"
 #include "outcore/v1/scene_query.grpc.pb.h"
 
@@ -28,6 +46,9 @@ namespace outcore::client {
 struct ConnectOptions {
   // How long connect() waits for the server to answer GetSceneInfo.
   double timeout_seconds = 10.0;
+  // Send large batches through shared memory when the server is on this
+  // host (see SceneClient); false: always over gRPC.
+  bool shared_memory = true;
 };
 
 struct CallOptions {
@@ -48,7 +69,12 @@ struct CallOptions {
 struct CallStats {
   uint64_t messages = 0;  // replies received (1 for a unary call)
   v1::QueryStats engine;  // summed over replies
+  bool shared = false;    // the rays and answers went through shared memory
 };
+
+// Batches of at least this many rays use shared memory (when it is on):
+// below it the bytes path costs less than mapping an object on the server.
+inline constexpr uint64_t kSharedMinRays = 16384;
 
 class SceneClient {
  public:
@@ -77,13 +103,33 @@ class SceneClient {
   template <class Response>
   Status run(std::span<const Ray> rays, std::span<uint8_t> out, uint32_t out_bytes_per_ray,
              const CallOptions& options, CallStats* stats);
+  // The shared-memory call. Sets *send_bytes (and returns OK, answering
+  // nothing) when the batch must go as bytes instead: the server refused
+  // shared payloads (then for good), or no object of its size can be made.
+  template <class Response>
+  Status run_shared(std::span<const Ray> rays, std::span<uint8_t> out, uint32_t out_bytes_per_ray,
+                    const CallOptions& options, CallStats* stats, bool* send_bytes);
+  // The server's FAILED_PRECONDITION carried its "refused" marker.
+  static bool shared_refused(const grpc::ClientContext& context);
+  void stop_using_shared();
+  // A pooled object of at least `bytes`, or an error when none can be made.
+  Expected<std::unique_ptr<SharedMemoryObject>> take_object(uint64_t bytes);
+  void give_back_object(std::unique_ptr<SharedMemoryObject> object);
 
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<v1::SceneQuery::Stub> stub_;
   std::string address_;
   v1::SceneInfo scene_;
   uint64_t max_chunk_rays_ = 0;
+  std::atomic<bool> use_shared_{false};
+  // Objects of this many bytes or more could not be made: such batches go as bytes.
+  std::atomic<uint64_t> shared_failed_bytes_{~uint64_t{0}};
+  std::mutex objects_mutex_;
+  std::vector<std::unique_ptr<SharedMemoryObject>> spare_objects_;  // at most kSpareObjects
 };
+
+// True for gRPC targets on this host: 127.x.y.z, localhost, [::1], unix:.
+bool is_loopback_target(const std::string& address);
 
 // The engine's figures from the wire's (a reply's, or CallStats::engine).
 // Those the wire does not carry per request stay 0: peak_bytes_resident,

@@ -22,6 +22,7 @@ enum class StatusCode {
   kFailedPrecondition, // e.g. a store of another format version
   kResourceExhausted,  // a budget would be exceeded
   kOutOfRange,         // an index or size beyond what the format allows
+  kPermissionDenied,   // the caller may not use what it named
   kCancelled,          // interrupted by the user
   kIoError,            // the operating system refused a read or write
   kInternal,           // a broken invariant; a bug in Outcore
@@ -60,6 +61,7 @@ inline Status data_loss(std::string m) { return {StatusCode::kDataLoss, std::mov
 inline Status failed_precondition(std::string m) { return {StatusCode::kFailedPrecondition, std::move(m)}; }
 inline Status resource_exhausted(std::string m) { return {StatusCode::kResourceExhausted, std::move(m)}; }
 inline Status out_of_range(std::string m) { return {StatusCode::kOutOfRange, std::move(m)}; }
+inline Status permission_denied(std::string m) { return {StatusCode::kPermissionDenied, std::move(m)}; }
 inline Status cancelled(std::string m) { return {StatusCode::kCancelled, std::move(m)}; }
 inline Status io_error(std::string m) { return {StatusCode::kIoError, std::move(m)}; }
 inline Status internal_error(std::string m) { return {StatusCode::kInternal, std::move(m)}; }

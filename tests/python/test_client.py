@@ -68,7 +68,8 @@ def test_result_dtypes_shapes_and_read_only_views(client, bounds):
 def test_streamed_batch_equals_trace_bitwise(small_server, store, bounds, tmp_path):
     # 1 MiB messages hold ~32k hits: this batch needs 5 chunks.
     rays = make_rays(bounds, 150_000, seed=11, columns=8)
-    with outcore.SceneClient(small_server.address, timeout=120) as client:
+    # Bytes only: shared memory would take it as one unary call (test_shared.py).
+    with outcore.SceneClient(small_server.address, timeout=120, shared_memory=False) as client:
         assert client.scene_info()["max_message_bytes"] == 1 << 20
         requests_before = client.stats()["requests"]
         result = client.cast_rays(rays)
@@ -96,7 +97,7 @@ def test_large_batch_streams_by_default_in_order_and_equals_trace_bitwise(server
     # Fits one 64 MiB message, but batches of > 262,144 rays stream in
     # 65,536-ray chunks (the server may trace queued chunks together).
     rays = make_rays(bounds, 300_001, seed=21)
-    with outcore.SceneClient(server.address, timeout=120) as client:
+    with outcore.SceneClient(server.address, timeout=120, shared_memory=False) as client:
         before = client.stats()["requests"]
         result = client.cast_rays(rays)
         after = client.stats()["requests"]
@@ -110,7 +111,7 @@ def test_batch_many_times_the_max_message_streams_with_any_ray_layout(small_serv
     # 330 k rays against 1 MiB messages: 11 chunks of 32,256 rays for the hits
     # (32 bytes each), 8 of 43,008 for occlusion (the 24-byte rays limit).
     rays = make_rays(bounds, 330_000, seed=22, columns=6)
-    with outcore.SceneClient(small_server.address, timeout=120) as client:
+    with outcore.SceneClient(small_server.address, timeout=120, shared_memory=False) as client:
         before = client.stats()["requests"]
         result = client.cast_rays(rays)
         occluded = client.test_occlusions(rays)
@@ -298,7 +299,7 @@ def test_streamed_last_stats_add_up_to_the_servers(small_server, bounds):
     # Chunks the server traced together carry the call's figures in the last
     # reply only, so the client's sums over the replies are exact.
     rays = make_rays(bounds, 100_000, seed=72)
-    with outcore.SceneClient(small_server.address, timeout=60) as client:
+    with outcore.SceneClient(small_server.address, timeout=60, shared_memory=False) as client:
         before = client.stats()
         client.cast_rays(rays)
         after = client.stats()
@@ -363,7 +364,7 @@ def test_unreachable_server_is_unavailable():
 @pytest.mark.parametrize(
     "kwargs",
     [dict(address=""), dict(timeout=0), dict(timeout=-1), dict(max_message_mb=0), dict(chunk_rays=0),
-     dict(chunk_rays=2.5)],
+     dict(chunk_rays=2.5), dict(shared_memory=1), dict(shared_memory=None), dict(shared_memory="yes")],
 )
 def test_bad_client_options_are_a_value_error(kwargs):
     args = dict(address="127.0.0.1:1") | kwargs

@@ -12,14 +12,19 @@ def key(field, wire_type):
     return _wire.varint(field << 3 | wire_type)
 
 
-def reference_request(rays, strict=False, no_reorder=False, sequence=0):
+def reference_request(rays, strict=False, no_reorder=False, sequence=0, shared=None):
     layout = pb.RAY_LAYOUT_F32X6 if rays.shape[1] == 6 else pb.RAY_LAYOUT_F32X8
-    return pb.QueryRequest(
-        batch=pb.RayBatch(layout_version=1, ray_layout=layout, ray_count=rays.shape[0], rays=rays.tobytes()),
+    request = pb.QueryRequest(
+        batch=pb.RayBatch(layout_version=1, ray_layout=layout, ray_count=rays.shape[0],
+                          rays=b"" if shared else rays.tobytes()),
         strict=strict,
         no_reorder=no_reorder,
         sequence=sequence,
     )
+    if shared is not None:
+        request.shared.CopyFrom(pb.SharedPayload(name=shared.name, rays_offset=shared.rays_offset,
+                                                 answers_offset=shared.answers_offset, token=shared.token))
+    return request
 
 
 @pytest.mark.parametrize("n", [0, 1, 5, 4097])
@@ -34,6 +39,53 @@ def test_encode_query_parses_as_the_generated_request(n, columns, strict, no_reo
     # too (but for n = 0, where proto3 omits the zero count; never sent).
     if n:
         assert data == reference_request(rays, strict, no_reorder, sequence).SerializeToString()
+
+
+@pytest.mark.parametrize("n", [1, 16_384, 300_001])
+@pytest.mark.parametrize("columns", [6, 8])
+@pytest.mark.parametrize(
+    "shared",
+    [_wire.SharedRef("/outcore-py-12-0123456789abcdef", 0, 1 << 20, bytes(range(16))),
+     _wire.SharedRef("/outcore-x", 64, 0),  # zero offsets and an empty token are omitted, as proto3 does
+     _wire.SharedRef("/outcore-" + "a" * 200, 2**40, 2**41 + 64, b"\xff" * 16)],
+)
+def test_encode_query_with_a_shared_payload_parses_as_the_generated_request(n, columns, shared):
+    rays = np.zeros((n, columns), "<f4")
+    data = _wire.encode_query(rays, strict=True, shared=shared)
+    parsed = pb.QueryRequest.FromString(data)
+    assert parsed.HasField("shared")
+    assert parsed.batch.rays == b"" and parsed.batch.ray_count == n
+    assert parsed == reference_request(rays, True, shared=shared)
+    assert data == reference_request(rays, True, shared=shared).SerializeToString()
+    assert len(data) < 300  # no rays: the message is tiny whatever the batch
+
+
+def test_encode_query_with_an_empty_shared_payload_still_sends_the_field():
+    # proto3 submessage presence: an all-default SharedPayload is still "set".
+    rays = np.zeros((3, 6), "<f4")
+    parsed = pb.QueryRequest.FromString(_wire.encode_query(rays, shared=_wire.SharedRef("")))
+    assert parsed.HasField("shared") and parsed.shared == pb.SharedPayload()
+
+
+def test_shared_payload_field_numbers_match_the_proto():
+    assert pb.QueryRequest.DESCRIPTOR.fields_by_name["shared"].number == 5
+    fields = pb.SharedPayload.DESCRIPTOR.fields_by_name
+    assert [fields[name].number for name in ("name", "rays_offset", "answers_offset", "token")] == [1, 2, 3, 4]
+    for message in (pb.IntersectResponse, pb.OccludedResponse):
+        assert message.DESCRIPTOR.fields_by_name["answers_in_shared"].number == 6
+    assert pb.SceneInfo.DESCRIPTOR.fields_by_name["shared_payloads"].number == 16
+
+
+@pytest.mark.parametrize("message_type", [pb.IntersectResponse, pb.OccludedResponse])
+def test_decode_reply_reads_answers_in_shared(message_type):
+    stats = pb.QueryStats(rays=20_000, rays_hit=7)
+    message = message_type(layout_version=1, ray_count=20_000, stats=stats, answers_in_shared=True)
+    reply = _wire.decode_reply(message.SerializeToString())
+    assert reply.answers_in_shared
+    assert (reply.layout_version, reply.ray_count, reply.payload_size) == (1, 20_000, 0)
+    assert pb.QueryStats.FromString(reply.stats) == stats
+    plain = message_type(layout_version=1, ray_count=1).SerializeToString()
+    assert not _wire.decode_reply(plain).answers_in_shared
 
 
 def test_layout_constants_match_the_proto():

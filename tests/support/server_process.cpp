@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -43,7 +44,10 @@ std::unique_ptr<ServerProcess> ServerProcess::start(const std::string& scene,
   server->stdout_fd_ = pipe_fds[0];
   // Everything the child needs is built before fork(): between fork and exec a
   // child of a multi-threaded process may only make async-signal-safe calls.
-  std::vector<std::string> args{outcore_binary(), "serve", scene, "--listen", "127.0.0.1:0"};
+  std::vector<std::string> args{outcore_binary(), "serve", scene};
+  if (std::find(extra.begin(), extra.end(), "--listen") == extra.end()) {
+    args.insert(args.end(), {"--listen", "127.0.0.1:0"});
+  }
   args.insert(args.end(), extra.begin(), extra.end());
   std::vector<char*> argv;
   for (std::string& a : args) argv.push_back(a.data());

@@ -22,7 +22,8 @@ namespace outcore::testing {
 
 class ServerProcess {
  public:
-  // Starts `outcore serve SCENE --listen 127.0.0.1:0 EXTRA...` and waits up to
+  // Starts `outcore serve SCENE --listen 127.0.0.1:0 EXTRA...` (without the
+  // --listen when EXTRA has its own) and waits up to
   // `timeout` for its "listening on" line. On failure returns null and sets
   // `error` (with the server's log).
   static std::unique_ptr<ServerProcess> start(const std::string& scene, const std::vector<std::string>& extra,

@@ -5,6 +5,8 @@ Why not the generated classes: they copy the packed ray/hit bytes two or three
 times (into the message, out of it into a new bytes object). Here a request is
 built with one copy (the rays straight into the serialised bytes) and a reply's
 payload is handed to numpy as a zero-copy view of the bytes gRPC received.
+A request with a shared payload (SharedPayload, field 5) carries no rays
+bytes at all, and its reply no answers (answers_in_shared, field 6).
 Everything else (scene info, stats, per-request QueryStats) uses the generated
 classes. tests/python/test_wire.py checks this codec against them.
 
@@ -12,6 +14,8 @@ Thread-safety: pure functions.
 """
 
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 
@@ -38,12 +42,29 @@ _TAG_REQUEST_BATCH = bytes([1 << 3 | _LEN])
 _TAG_REQUEST_STRICT = bytes([2 << 3 | _VARINT])
 _TAG_REQUEST_NO_REORDER = bytes([3 << 3 | _VARINT])
 _TAG_REQUEST_SEQUENCE = bytes([4 << 3 | _VARINT])
+_TAG_REQUEST_SHARED = bytes([5 << 3 | _LEN])
 _TAG_BATCH_VERSION = bytes([1 << 3 | _VARINT])
 _TAG_BATCH_LAYOUT = bytes([2 << 3 | _VARINT])
 _TAG_BATCH_COUNT = bytes([3 << 3 | _VARINT])
 _TAG_BATCH_RAYS = bytes([4 << 3 | _LEN])
+_TAG_SHARED_NAME = bytes([1 << 3 | _LEN])
+_TAG_SHARED_RAYS_OFFSET = bytes([2 << 3 | _VARINT])
+_TAG_SHARED_ANSWERS_OFFSET = bytes([3 << 3 | _VARINT])
+_TAG_SHARED_TOKEN = bytes([4 << 3 | _LEN])
 # Reply fields (same numbers in IntersectResponse and OccludedResponse).
 _REPLY_VERSION, _REPLY_COUNT, _REPLY_PAYLOAD, _REPLY_SEQUENCE, _REPLY_STATS = 1, 2, 3, 4, 5
+_REPLY_ANSWERS_IN_SHARED = 6
+
+
+class SharedRef(NamedTuple):
+    """A request's SharedPayload: the shared-memory object's name (with the
+    leading '/'), the byte offsets of the rays and of the answers in it, and
+    the token in its header."""
+
+    name: str
+    rays_offset: int = 0
+    answers_offset: int = 0
+    token: bytes = b""
 
 
 class WireError(ValueError):
@@ -59,35 +80,63 @@ def varint(value: int) -> bytes:
     return bytes(out)
 
 
+def _encode_shared(shared: SharedRef) -> bytes:
+    name = shared.name.encode("utf-8")
+    parts = []
+    # proto3: zero values are omitted; the submessage itself is always sent.
+    if name:
+        parts += [_TAG_SHARED_NAME, varint(len(name)), name]
+    if shared.rays_offset:
+        parts += [_TAG_SHARED_RAYS_OFFSET, varint(shared.rays_offset)]
+    if shared.answers_offset:
+        parts += [_TAG_SHARED_ANSWERS_OFFSET, varint(shared.answers_offset)]
+    if shared.token:
+        parts += [_TAG_SHARED_TOKEN, varint(len(shared.token)), bytes(shared.token)]
+    body = b"".join(parts)
+    return b"".join((_TAG_REQUEST_SHARED, varint(len(body)), body))
+
+
 def encode_query(
-    rays: np.ndarray, strict: bool = False, no_reorder: bool = False, sequence: int = 0
+    rays: np.ndarray,
+    strict: bool = False,
+    no_reorder: bool = False,
+    sequence: int = 0,
+    shared: SharedRef | None = None,
 ) -> bytes:
-    """Serialises a QueryRequest for C-contiguous (n, 6|8) '<f4' rays."""
+    """Serialises a QueryRequest for C-contiguous (n, 6|8) '<f4' rays. With
+    `shared` the rays are not copied in (batch.rays is omitted: they are in
+    the shared object); `rays` then only gives the count and layout."""
     n, columns = rays.shape
     layout = RAY_LAYOUT_F32X6 if columns == 6 else RAY_LAYOUT_F32X8
-    payload = memoryview(rays.reshape(-1).view(np.uint8))
-    batch_head = b"".join(
-        (
-            _TAG_BATCH_VERSION, varint(LAYOUT_VERSION),
-            _TAG_BATCH_LAYOUT, varint(layout),
-            _TAG_BATCH_COUNT, varint(n),
-            _TAG_BATCH_RAYS, varint(payload.nbytes),
-        )
-    )
-    parts = [_TAG_REQUEST_BATCH, varint(len(batch_head) + payload.nbytes), batch_head, payload]
+    head = [
+        _TAG_BATCH_VERSION, varint(LAYOUT_VERSION),
+        _TAG_BATCH_LAYOUT, varint(layout),
+        _TAG_BATCH_COUNT, varint(n),
+    ]
+    if shared is None:
+        payload = memoryview(rays.reshape(-1).view(np.uint8))
+        head += [_TAG_BATCH_RAYS, varint(payload.nbytes)]
+        payload_bytes = payload.nbytes
+    else:
+        payload, payload_bytes = b"", 0
+    batch_head = b"".join(head)
+    parts = [_TAG_REQUEST_BATCH, varint(len(batch_head) + payload_bytes), batch_head, payload]
     if strict:
         parts += [_TAG_REQUEST_STRICT, b"\x01"]
     if no_reorder:
         parts += [_TAG_REQUEST_NO_REORDER, b"\x01"]
     if sequence:
         parts += [_TAG_REQUEST_SEQUENCE, varint(sequence)]
+    if shared is not None:
+        parts.append(_encode_shared(shared))
     return b"".join(parts)
 
 
 class Reply:
     """A parsed IntersectResponse/OccludedResponse; the payload stays in `data`."""
 
-    __slots__ = ("data", "layout_version", "ray_count", "payload_offset", "payload_size", "sequence", "stats")
+    __slots__ = ("data", "layout_version", "ray_count", "payload_offset", "payload_size", "sequence", "stats",
+                 "answers_in_shared")
 
     def __init__(self, data: bytes):
         self.data = data
@@ -97,6 +146,7 @@ class Reply:
         self.payload_size = 0
         self.sequence = 0
         self.stats = b""  # serialised QueryStats
+        self.answers_in_shared = False  # the answers are in the request's shared object
 
     def payload(self, dtype: np.dtype) -> np.ndarray:
         """The hits/occluded bytes as a read-only view of `data` (no copy)."""
@@ -139,6 +189,8 @@ def decode_reply(data: bytes) -> Reply:
                 reply.ray_count = value
             elif field == _REPLY_SEQUENCE:
                 reply.sequence = value
+            elif field == _REPLY_ANSWERS_IN_SHARED:
+                reply.answers_in_shared = value != 0
         elif wire_type == _LEN:
             size, pos = _read_varint(data, pos)
             if pos + size > end:

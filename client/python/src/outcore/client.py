@@ -14,9 +14,31 @@ memoryview slices of the caller's (contiguous float32) rays, serialised one
 at a time as gRPC asks for them, and replies are copied straight into one
 preallocated result array.
 
+Same-host shared memory (proto SharedPayload; _shared.py): a batch of at
+least 16,384 rays goes as ONE unary call whose rays and answers travel through
+a POSIX shared-memory segment (/dev/shm/outcore-py-<pid>-<random>) instead of
+the message, skipping protobuf framing and the socket buffers, when all of
+these hold: shared_memory=True (the default), chunk_rays is None, the address
+is this host ("localhost", 127.x.y.z, [::1], ipv4:/ipv6: loopback forms, or a
+unix: socket), and the server says it accepts shared payloads (SceneInfo
+shared_payloads, asked once, lazily). Smaller batches gain little over the
+message and stay bytes. The rays are copied into the segment once, and the
+answers copied out of it into a fresh array after the reply, so results never
+alias the segment, which is kept for the client's life and reused (grown when
+a batch needs more; unlinked by close()). Each segment starts with a 64-byte
+header holding a random token that goes with the call, so only this client
+can name its segments to the server. If the server refuses a segment
+(FAILED_PRECONDITION with its "refused" trailing metadata: the peer it sees
+is not loopback, it runs with --no-shared-payloads, it cannot open the
+object because it has another /dev/shm), the call is redone as bytes and
+shared memory stays off for this client; if no segment can be made (no
+/dev/shm, no room in it), that batch and larger ones go as bytes.
+`last_call_shared` tells which path the last query took.
+
 Thread-safety: one SceneClient may be used from several threads at once (gRPC
-channels are thread-safe); only `last_stats` is per-client and then belongs
-to whichever call finished last.
+channels are thread-safe; concurrent shared calls each take their own segment
+from a locked pool); only `last_stats` and `last_call_shared` are per-client
+and then belong to whichever call finished last.
 """
 
 from __future__ import annotations
@@ -26,7 +48,7 @@ import math
 import grpc
 import numpy as np
 
-from . import _wire
+from . import _shared, _wire
 from ._rays import as_wire_rays
 from .errors import OutcoreError, from_rpc_error
 from .v1 import scene_query_pb2 as pb
@@ -46,7 +68,24 @@ _ALWAYS_FITS = 512 * 1024
 # (the C++ client's rule, client/cpp/scene_client.cpp; docs/BENCHMARKS.md).
 _STREAM_ABOVE_RAYS = 262_144
 _STREAM_CHUNK_RAYS = 65_536
+# Batches of at least this many rays use a shared-memory segment when they
+# can (see the module docstring); below it the message costs little and a
+# segment would only hold memory.
+_SHARED_MIN_RAYS = 16_384
+# The server's trailing metadata on a refusal (proto/outcore/v1/shared_payload_wire.h).
+_SHARED_REFUSED = ("outcore-shared-payload", "refused")
 _SERVICE = pb.DESCRIPTOR.services_by_name["SceneQuery"].full_name
+
+
+def _refused(error: grpc.RpcError) -> bool:
+    """The server's FAILED_PRECONDITION refusing shared payloads (as opposed
+    to a shared call that failed)."""
+    code_fn = getattr(error, "code", None)
+    if not callable(code_fn) or code_fn() != grpc.StatusCode.FAILED_PRECONDITION:
+        return False
+    trailers_fn = getattr(error, "trailing_metadata", None)
+    trailers = (trailers_fn() if callable(trailers_fn) else None) or ()
+    return any((key, value) == _SHARED_REFUSED for key, value in trailers)
 
 
 def _message_to_dict(message) -> dict:
@@ -89,10 +128,13 @@ class SceneClient:
     max_message_mb: largest message this client sends or accepts, MiB.
     chunk_rays: rays per streamed chunk; None sizes chunks from the message
     limits, and batches that fit one message go as a single unary call.
+    shared_memory: pass batches of >= 16,384 rays through a shared-memory
+    segment when the server is on this host and accepts it (module
+    docstring); False always sends bytes. Only with chunk_rays None.
     """
 
     def __init__(self, address: str, timeout: float | None = None, max_message_mb: float = 64,
-                 chunk_rays: int | None = None):
+                 chunk_rays: int | None = None, shared_memory: bool = True):
         if not isinstance(address, str) or not address:
             raise ValueError(f"address must be a non-empty 'host:port' string, got {address!r}")
         if timeout is not None and not (timeout > 0 and math.isfinite(timeout)):
@@ -102,9 +144,21 @@ class SceneClient:
         if chunk_rays is not None and (isinstance(chunk_rays, bool) or not isinstance(chunk_rays, int)
                                        or chunk_rays < 1):
             raise ValueError(f"chunk_rays must be None or a positive int, got {chunk_rays!r}")
+        if not isinstance(shared_memory, bool):
+            raise ValueError(f"shared_memory must be True or False, got {shared_memory!r}")
         self.address = address
         self.timeout = timeout
         self.chunk_rays = chunk_rays
+        self.shared_memory = shared_memory
+        # Shared memory: only worth asking the server about for local targets.
+        self._shared_local = _shared.supported() and _shared.is_loopback_target(address)
+        self._server_shared_payloads: bool | None = None  # SceneInfo.shared_payloads, once asked
+        # Why shared memory is off for this client after a failure (None: not off).
+        self._shared_disabled_reason: str | None = None
+        self._shared_pool = _shared.SegmentPool()
+        # Segments of this many bytes or more could not be made: such batches go as bytes.
+        self._shared_failed_bytes = math.inf
+        self._last_call_shared = False
         self._max_message_bytes = min(int(max_message_mb * _MIB), _GRPC_MAX_LENGTH)
         self._server_max_message_bytes: int | None = None
         self._channel = grpc.insecure_channel(
@@ -142,7 +196,20 @@ class SceneClient:
     # -- lifetime ---------------------------------------------------------
 
     def close(self) -> None:
+        """Closes the channel and removes the shared-memory segments (a segment
+        still in use by a running call goes when that call ends)."""
+        self._shared_pool.close()
         self._channel.close()
+
+    def __del__(self):
+        # Best effort for clients never closed; weakref finalizers in _shared
+        # still unlink the files at interpreter exit.
+        pool = getattr(self, "_shared_pool", None)
+        if pool is not None:
+            try:
+                pool.close()
+            except Exception:
+                pass
 
     def __enter__(self) -> "SceneClient":
         return self
@@ -152,6 +219,12 @@ class SceneClient:
 
     def __repr__(self) -> str:
         return f"SceneClient({self.address!r}, timeout={self.timeout!r})"
+
+    @property
+    def last_call_shared(self) -> bool:
+        """Whether the last query that succeeded passed its rays and answers
+        through shared memory (False for bytes, streams and empty batches)."""
+        return self._last_call_shared
 
     # -- queries ----------------------------------------------------------
 
@@ -165,10 +238,11 @@ class SceneClient:
         primitive_ids (...,) uint32, INVALID_ID on a miss; primitive_uvs
         (..., 2) float32; primitive_normals (..., 3) float32 (unit geometric
         normal, zeros on a miss). They are views of one buffer (the reply's
-        bytes when the batch fitted one message): use np.array(x) for a
-        writable copy. strict: invalid rays (NaN/Inf, zero direction, bad
-        tnear/tfar) raise OutcoreError INVALID_ARGUMENT naming the first bad
-        ray, instead of being misses.
+        bytes when the batch fitted one message; for a shared-memory call a
+        fresh copy out of the segment, never the segment itself): use
+        np.array(x) for a writable copy. strict: invalid rays (NaN/Inf, zero
+        direction, bad tnear/tfar) raise OutcoreError INVALID_ARGUMENT naming
+        the first bad ray, instead of being misses.
         """
         flat, batch_shape = as_wire_rays(rays)
         hits = self._query(_INTERSECT, flat, strict)
@@ -194,9 +268,11 @@ class SceneClient:
         """The served scene (GetSceneInfo) as a dict: store_path, triangle_count,
         brick_count, bounds_lo/bounds_hi (3 floats each), inputs (list of
         {spec, triangle_count, degenerate_count}; geometry_id = index),
-        cache_budget_bytes, max_message_bytes, server_version, ..."""
+        cache_budget_bytes, max_message_bytes, shared_payloads (whether it
+        accepts shared-memory payloads from this host), server_version, ..."""
         info = self._call_plain(self._get_scene_info, pb.GetSceneInfoRequest(), "GetSceneInfo")
         self._server_max_message_bytes = info.max_message_bytes
+        self._server_shared_payloads = info.shared_payloads
         return _message_to_dict(info)
 
     def stats(self) -> dict:
@@ -245,20 +321,32 @@ class SceneClient:
             out = np.empty(0, dtype=query.record_dtype)
             out.flags.writeable = False
             self.last_stats = None
+            self._last_call_shared = False
             return out
+        if self._shared_wanted(n):
+            out = self._query_shared(query, rays, strict)
+            if out is not None:
+                return out
+            # The server refused the segment or none could be made: shared
+            # memory is now off for this client, and the batch goes as bytes.
         chunk = self._chunk_size(query, n, rays.shape[1] * 4)
         if n <= chunk:
             return self._query_unary(query, rays, strict)
         return self._query_stream(query, rays, strict, chunk)
 
     def _check_reply(self, query: _Query, reply: _wire.Reply, expected_rays: int, method: str,
-                     sequence: int | None = None) -> None:
+                     sequence: int | None = None, shared: bool = False) -> None:
         problem = None
         if reply.layout_version != _wire.LAYOUT_VERSION:
             problem = f"layout_version {reply.layout_version}, expected {_wire.LAYOUT_VERSION}"
         elif reply.ray_count != expected_rays:
             problem = f"ray_count {reply.ray_count}, expected {expected_rays}"
-        elif reply.payload_size != expected_rays * query.record_dtype.itemsize:
+        elif reply.answers_in_shared != shared:
+            problem = ("answers_in_shared not set for a request with a shared payload" if shared else
+                       "answers_in_shared set for a request without a shared payload")
+        elif shared and reply.payload_size:
+            problem = f"{reply.payload_size} payload bytes beside answers in shared memory, expected none"
+        elif not shared and reply.payload_size != expected_rays * query.record_dtype.itemsize:
             problem = (f"{reply.payload_size} payload bytes, expected "
                        f"{expected_rays} x {query.record_dtype.itemsize}")
         elif sequence is not None and reply.sequence != sequence:
@@ -277,7 +365,67 @@ class SceneClient:
             raise OutcoreError("DATA_LOSS", f"malformed reply: {e}", query.unary) from None
         self._check_reply(query, reply, rays.shape[0], query.unary)
         self.last_stats = _message_to_dict(pb.QueryStats.FromString(reply.stats))
+        self._last_call_shared = False
         return reply.payload(query.record_dtype)
+
+    def _shared_wanted(self, n: int) -> bool:
+        if not (self.shared_memory and self.chunk_rays is None and n >= _SHARED_MIN_RAYS
+                and self._shared_local and self._shared_disabled_reason is None):
+            return False
+        if self._server_shared_payloads is None:
+            self.scene_info()
+        return bool(self._server_shared_payloads)
+
+    def _disable_shared(self, reason: str) -> None:
+        self._shared_disabled_reason = reason
+        self._shared_pool.close()  # frees /dev/shm now; in-use segments go when given back
+
+    def _query_shared(self, query: _Query, rays: np.ndarray, strict: bool) -> np.ndarray | None:
+        """One unary call with the rays and answers in a shared segment. None
+        when the batch must go as bytes: the server refused the segment
+        (shared memory is then off for this client) or no segment of its
+        size can be made (then for batches at least as large). Other errors
+        raise as usual."""
+        n, columns = rays.shape
+        rays_offset = _shared.HEADER_BYTES
+        answers_offset = rays_offset + _shared.round_up(n * columns * 4, _shared.ALIGNMENT)
+        need = answers_offset + n * query.record_dtype.itemsize
+        if need >= self._shared_failed_bytes:
+            return None
+        try:
+            segment = self._shared_pool.take(need)
+        except OSError:
+            self._shared_failed_bytes = min(self._shared_failed_bytes, need)
+            return None
+        # Only after a reply is the server certainly done with the segment: a
+        # call abandoned on our side (deadline, interrupt) may still be traced
+        # and its answers written, so that segment must never serve another.
+        reusable = False
+        try:
+            segment.write_rays(rays, rays_offset)
+            request = _wire.encode_query(
+                rays, strict=strict,
+                shared=_wire.SharedRef(segment.name, rays_offset, answers_offset, segment.token))
+            try:
+                data = self._calls[query.unary](request, timeout=self.timeout)
+            except grpc.RpcError as e:
+                if _refused(e):
+                    details_fn = getattr(e, "details", None)
+                    self._disable_shared((details_fn() if callable(details_fn) else None) or str(e))
+                    return None
+                raise from_rpc_error(e, query.unary) from None
+            reusable = True
+            try:
+                reply = _wire.decode_reply(data)
+            except _wire.WireError as e:
+                raise OutcoreError("DATA_LOSS", f"malformed reply: {e}", query.unary) from None
+            self._check_reply(query, reply, n, query.unary, shared=True)
+            out = segment.read_answers(query.record_dtype, n, answers_offset)
+        finally:
+            self._shared_pool.give(segment, reusable)
+        self.last_stats = _message_to_dict(pb.QueryStats.FromString(reply.stats))
+        self._last_call_shared = True
+        return out
 
     def _query_stream(self, query: _Query, rays: np.ndarray, strict: bool, chunk: int) -> np.ndarray:
         n = rays.shape[0]
@@ -324,5 +472,6 @@ class SceneClient:
             for field in chunk_stats.DESCRIPTOR.fields:
                 setattr(totals, field.name, getattr(totals, field.name) + getattr(chunk_stats, field.name))
         self.last_stats = _message_to_dict(totals)
+        self._last_call_shared = False
         out.flags.writeable = False
         return out

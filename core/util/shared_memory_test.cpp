@@ -1,0 +1,215 @@
+#include "core/util/shared_memory.h"
+
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <numeric>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace outcore {
+namespace {
+
+// Shrinks the object behind every mapping of it, as a careless or hostile
+// client could while the server copies.
+void truncate_object(const std::string& name, off_t size) {
+  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+  ASSERT_GE(fd, 0) << name;
+  ASSERT_EQ(ftruncate(fd, size), 0);
+  close(fd);
+}
+
+TEST(SharedMemoryObject, WhatTheCreatorWritesTheOpenerCopiesOutAndBack) {
+  auto created = SharedMemoryObject::create("test", 1 << 20);
+  ASSERT_TRUE(created.ok()) << created.status().message();
+  ASSERT_EQ(created->size(), 1u << 20);
+  EXPECT_TRUE(created->name().starts_with("/outcore-test-")) << created->name();
+  std::iota(reinterpret_cast<uint8_t*>(created->data()) + SharedMemoryObject::kHeaderBytes,
+            reinterpret_cast<uint8_t*>(created->data()) + 4096, uint8_t{0});
+
+  auto opened = SharedMemoryObject::open(created->name());
+  ASSERT_TRUE(opened.ok()) << opened.status().message();
+  EXPECT_EQ(opened->size(), created->size());
+  std::vector<uint8_t> out(4096);
+  ASSERT_TRUE(opened->copy_out(0, out.data(), out.size()).ok());
+  EXPECT_EQ(std::memcmp(out.data(), created->data(), out.size()), 0);
+
+  const std::vector<uint8_t> answer(1000, 0xab);
+  ASSERT_TRUE(opened->copy_in((1 << 20) - 1000, answer.data(), answer.size()).ok());
+  EXPECT_EQ(std::memcmp(created->data() + (1 << 20) - 1000, answer.data(), answer.size()), 0);
+}
+
+TEST(SharedMemoryObject, OnlyTheCreatorsTokenPasses) {
+  auto created = SharedMemoryObject::create("test", 4096);
+  ASSERT_TRUE(created.ok());
+  ASSERT_EQ(created->token().size(), SharedMemoryObject::kTokenBytes);
+  EXPECT_EQ(std::string(created->data(), SharedMemoryObject::kTokenBytes), created->token());
+  auto other = SharedMemoryObject::create("test", 4096);
+  ASSERT_TRUE(other.ok());
+  EXPECT_NE(other->token(), created->token()) << "tokens are random";
+
+  auto opened = SharedMemoryObject::open(created->name());
+  ASSERT_TRUE(opened.ok());
+  EXPECT_TRUE(opened->token().empty());
+  EXPECT_TRUE(opened->check_token(created->token()).ok());
+  for (const std::string& wrong : {other->token(), std::string(16, '\0'), created->token().substr(0, 15),
+                                   created->token() + "x", std::string()}) {
+    const Status status = opened->check_token(wrong);
+    EXPECT_EQ(status.code(), StatusCode::kPermissionDenied) << status.message();
+    EXPECT_NE(status.message().find(created->name()), std::string::npos) << status.message();
+  }
+}
+
+TEST(SharedMemoryObject, OpeningMapsOnlyTheBytesAskedFor) {
+  auto created = SharedMemoryObject::create("test", 1 << 20);
+  ASSERT_TRUE(created.ok());
+  auto opened = SharedMemoryObject::open(created->name(), 5000);
+  ASSERT_TRUE(opened.ok());
+  EXPECT_EQ(opened->size(), 1u << 20);
+  EXPECT_EQ(opened->mapped_bytes(), 5000u);
+  std::vector<uint8_t> out(8192);
+  EXPECT_TRUE(opened->copy_out(0, out.data(), 5000).ok());
+  EXPECT_EQ(opened->copy_out(4096, out.data(), 5000).code(), StatusCode::kOutOfRange);
+  // Asking for more than the object holds maps the object.
+  auto whole = SharedMemoryObject::open(created->name(), 2 << 20);
+  ASSERT_TRUE(whole.ok());
+  EXPECT_EQ(whole->mapped_bytes(), 1u << 20);
+}
+
+TEST(SharedMemoryObject, TheCreatorUnlinksItOnDestruction) {
+  std::string name;
+  {
+    auto created = SharedMemoryObject::create("test", 4096);
+    ASSERT_TRUE(created.ok());
+    name = created->name();
+    ASSERT_TRUE(SharedMemoryObject::open(name).ok());
+  }
+  auto reopened = SharedMemoryObject::open(name);
+  ASSERT_FALSE(reopened.ok());
+  EXPECT_EQ(reopened.status().code(), StatusCode::kNotFound);
+  EXPECT_NE(reopened.status().message().find(name), std::string::npos);
+}
+
+TEST(SharedMemoryObject, NamesOutsideThePatternAreRefusedNamingTheProblem) {
+  const std::vector<std::string> bad_names = {"",
+                                              "/",
+                                              "/outcore-",
+                                              "outcore-x",
+                                              "/other-x",
+                                              "/outcore-a/b",
+                                              "/outcore-../x",
+                                              "/outcore-sp ace",
+                                              "/outcore-" + std::string(201, 'a')};
+  for (const std::string& bad : bad_names) {
+    const Status status = SharedMemoryObject::check_name(bad);
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << bad;
+    auto opened = SharedMemoryObject::open(bad);
+    ASSERT_FALSE(opened.ok()) << bad;
+    EXPECT_EQ(opened.status().code(), StatusCode::kInvalidArgument) << bad;
+  }
+  EXPECT_TRUE(SharedMemoryObject::check_name("/outcore-A.z_0-9").ok());
+  EXPECT_TRUE(SharedMemoryObject::check_name("/outcore-" + std::string(200, 'a')).ok());
+}
+
+TEST(SharedMemoryObject, AMissingObjectIsNotFound) {
+  auto opened = SharedMemoryObject::open("/outcore-test-no-such-object-4f1c2a");
+  ASSERT_FALSE(opened.ok());
+  EXPECT_EQ(opened.status().code(), StatusCode::kNotFound);
+}
+
+TEST(SharedMemoryObject, RangesOutsideTheObjectAreOutOfRangeAndCopyNothing) {
+  auto created = SharedMemoryObject::create("test", 4096);
+  ASSERT_TRUE(created.ok());
+  auto opened = SharedMemoryObject::open(created->name());
+  ASSERT_TRUE(opened.ok());
+  std::vector<uint8_t> out(8192, 7);
+  EXPECT_EQ(opened->copy_out(0, out.data(), 4097).code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(opened->copy_out(4097, out.data(), 0).code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(opened->copy_out(1, out.data(), 4096).code(), StatusCode::kOutOfRange);
+  // An offset near 2^64 must not wrap around into the mapping.
+  EXPECT_EQ(opened->copy_out(~std::size_t{0} - 10, out.data(), 100).code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(opened->copy_in(4000, out.data(), 200).code(), StatusCode::kOutOfRange);
+  EXPECT_TRUE(opened->copy_out(4096, out.data(), 0).ok());
+  EXPECT_EQ(out[0], 7);
+}
+
+TEST(SharedMemoryObject, AnObjectTruncatedUnderAMappingIsAnErrorNotACrash) {
+  auto created = SharedMemoryObject::create("test", 1 << 20);
+  ASSERT_TRUE(created.ok());
+  auto opened = SharedMemoryObject::open(created->name());
+  ASSERT_TRUE(opened.ok());
+  truncate_object(created->name(), 4096);  // the mapping still spans 1 MiB
+
+  std::vector<uint8_t> buffer(1 << 20);
+  const Status read = opened->copy_out(0, buffer.data(), buffer.size());
+  EXPECT_EQ(read.code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(read.message().find("truncated"), std::string::npos) << read.message();
+  EXPECT_NE(read.message().find(created->name()), std::string::npos) << read.message();
+  const Status write = opened->copy_in(8192, buffer.data(), 4096);
+  EXPECT_EQ(write.code(), StatusCode::kFailedPrecondition);
+  // What is still backed copies as before, and the guard is reset.
+  EXPECT_TRUE(opened->copy_out(0, buffer.data(), 4096).ok());
+  EXPECT_TRUE(opened->copy_in(0, buffer.data(), 4096).ok());
+}
+
+TEST(SharedMemoryObject, ThreadsCopyingFromATruncatedObjectEachGetTheError) {
+  auto created = SharedMemoryObject::create("test", 1 << 20);
+  ASSERT_TRUE(created.ok());
+  auto opened = SharedMemoryObject::open(created->name());
+  ASSERT_TRUE(opened.ok());
+  truncate_object(created->name(), 0);
+  std::vector<StatusCode> codes(4, StatusCode::kOk);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      std::vector<uint8_t> buffer(1 << 18);
+      for (int round = 0; round < 20; ++round) {
+        const Status status = opened->copy_out(std::size_t(t) << 18, buffer.data(), buffer.size());
+        if (status.ok() || status.code() != StatusCode::kFailedPrecondition) {
+          codes[t] = status.code();
+          return;
+        }
+        codes[t] = status.code();
+      }
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  for (StatusCode code : codes) EXPECT_EQ(code, StatusCode::kFailedPrecondition);
+}
+
+TEST(SharedMemoryObject, AnObjectHoldsAtLeastItsHeader) {
+  auto created = SharedMemoryObject::create("test", 0);
+  ASSERT_TRUE(created.ok());
+  EXPECT_EQ(created->size(), SharedMemoryObject::kHeaderBytes);
+  auto opened = SharedMemoryObject::open(created->name());
+  ASSERT_TRUE(opened.ok());
+  EXPECT_EQ(opened->size(), SharedMemoryObject::kHeaderBytes);
+  EXPECT_TRUE(opened->check_token(created->token()).ok());
+  uint8_t byte = 0;
+  EXPECT_TRUE(opened->copy_out(SharedMemoryObject::kHeaderBytes, &byte, 0).ok());
+  EXPECT_EQ(opened->copy_out(SharedMemoryObject::kHeaderBytes, &byte, 1).code(), StatusCode::kOutOfRange);
+}
+
+TEST(SharedMemoryObject, AnOpenedEmptyObjectMapsNothing) {
+  auto created = SharedMemoryObject::create("test", 4096);
+  ASSERT_TRUE(created.ok());
+  const int fd = shm_open(created->name().c_str(), O_RDWR, 0);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(ftruncate(fd, 0), 0);
+  close(fd);
+  auto opened = SharedMemoryObject::open(created->name());
+  ASSERT_TRUE(opened.ok());
+  EXPECT_EQ(opened->size(), 0u);
+  EXPECT_EQ(opened->mapped_bytes(), 0u);
+  uint8_t byte = 0;
+  EXPECT_TRUE(opened->copy_out(0, &byte, 0).ok());
+  EXPECT_EQ(opened->copy_out(0, &byte, 1).code(), StatusCode::kOutOfRange);
+  EXPECT_EQ(opened->check_token(created->token()).code(), StatusCode::kOutOfRange);
+}
+
+}  // namespace
+}  // namespace outcore
