@@ -290,6 +290,10 @@ Expected<std::unique_ptr<SharedMemoryObject>> SceneClient::take_object(uint64_t 
       return object;
     }
   }
+  // Objects of clients that died without closing stay in /dev/shm until
+  // someone removes them: the first client of each process does.
+  static std::once_flag orphans_removed;
+  std::call_once(orphans_removed, [] { SharedMemoryObject::remove_orphans("cpp"); });
   OUTCORE_ASSIGN_OR_RETURN(SharedMemoryObject created,
                            SharedMemoryObject::create("cpp-" + std::to_string(getpid()), object_size(bytes)));
   return std::make_unique<SharedMemoryObject>(std::move(created));

@@ -1,6 +1,8 @@
 #include "core/util/shared_memory.h"
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -209,6 +211,36 @@ Expected<SharedMemoryObject> SharedMemoryObject::create(std::string_view suffix,
   }
   std::memcpy(object.data_, object.token_.data(), kTokenBytes);
   return object;
+}
+
+int SharedMemoryObject::remove_orphans(std::string_view client) {
+  const std::string prefix = std::string(kNamePrefix.substr(1)) + std::string(client) + "-";
+  DIR* directory = opendir("/dev/shm");
+  if (directory == nullptr) return 0;
+  int removed = 0;
+  while (const dirent* entry = readdir(directory)) {
+    const std::string_view file = entry->d_name;
+    if (!file.starts_with(prefix)) continue;
+    const std::string_view rest = file.substr(prefix.size());
+    const std::size_t dash = rest.find('-');
+    if (dash == 0 || dash == std::string_view::npos || dash > 9) continue;
+    pid_t pid = 0;
+    bool digits = true;
+    for (const char c : rest.substr(0, dash)) {
+      if (c < '0' || c > '9') digits = false;
+      pid = pid * 10 + (c - '0');
+    }
+    if (!digits || pid <= 0) continue;
+    // Alive (or not ours to signal): leave it. A pid taken again by another
+    // process keeps its objects until that process ends too.
+    if (kill(pid, 0) == 0 || errno != ESRCH) continue;
+    struct stat info {};
+    const std::string path = "/dev/shm/" + std::string(file);
+    if (lstat(path.c_str(), &info) != 0 || !S_ISREG(info.st_mode) || info.st_uid != geteuid()) continue;
+    if (shm_unlink(("/" + std::string(file)).c_str()) == 0) ++removed;
+  }
+  closedir(directory);
+  return removed;
 }
 
 Status SharedMemoryObject::check_token(std::string_view token) const {

@@ -65,6 +65,12 @@ class SharedMemoryObject {
   // /dev/shm has no room; IO_ERROR otherwise.
   static Expected<SharedMemoryObject> create(std::string_view suffix, std::size_t bytes);
 
+  // Unlinks the objects a client of kind `client` ("cpp", "py") left behind
+  // when it died without closing them: names kNamePrefix + client + "-PID-..."
+  // owned by this user whose PID is no longer running. Returns how many it
+  // removed. Clients call it once per process before their first object.
+  static int remove_orphans(std::string_view client);
+
   // PERMISSION_DENIED unless the header's token equals `token` (which must
   // be kTokenBytes long); FAILED_PRECONDITION when the object was truncated.
   Status check_token(std::string_view token) const;

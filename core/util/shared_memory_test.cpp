@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/mman.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cstring>
@@ -78,6 +79,29 @@ TEST(SharedMemoryObject, OpeningMapsOnlyTheBytesAskedFor) {
   auto whole = SharedMemoryObject::open(created->name(), 2 << 20);
   ASSERT_TRUE(whole.ok());
   EXPECT_EQ(whole->mapped_bytes(), 1u << 20);
+}
+
+TEST(SharedMemoryObject, OrphansOfDeadClientsAreRemovedAndOthersKept) {
+  const pid_t child = fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) _exit(0);
+  ASSERT_EQ(waitpid(child, nullptr, 0), child);  // `child` is now a dead pid
+  const auto make = [](const std::string& name) {
+    const int fd = shm_open(name.c_str(), O_RDWR | O_CREAT | O_EXCL, 0600);
+    EXPECT_GE(fd, 0) << name;
+    close(fd);
+  };
+  const std::string dead = "/outcore-orphantest-" + std::to_string(child) + "-0123456789abcdef";
+  const std::string alive = "/outcore-orphantest-" + std::to_string(getpid()) + "-0123456789abcdef";
+  const std::string other_kind = "/outcore-otherkind-" + std::to_string(child) + "-0123456789abcdef";
+  const std::string not_a_pid = "/outcore-orphantest-12x4-0123456789abcdef";
+  for (const std::string& name : {dead, alive, other_kind, not_a_pid}) make(name);
+  EXPECT_EQ(SharedMemoryObject::remove_orphans("orphantest"), 1);
+  EXPECT_EQ(SharedMemoryObject::open(dead).status().code(), StatusCode::kNotFound);
+  for (const std::string& name : {alive, other_kind, not_a_pid}) {
+    EXPECT_TRUE(SharedMemoryObject::open(name).ok()) << name;
+    shm_unlink(name.c_str());
+  }
 }
 
 TEST(SharedMemoryObject, TheCreatorUnlinksItOnDestruction) {

@@ -385,6 +385,30 @@ def test_segment_sizes_are_rounded_up_with_little_spare():
         assert size % _shared.ALIGNMENT == 0  # whole MiB steps
 
 
+def test_orphans_of_dead_clients_are_removed_and_others_kept():
+    child = os.fork()
+    if child == 0:
+        os._exit(0)
+    os.waitpid(child, 0)  # now a dead pid
+    names = {"dead": f"{_shared.NAME_PREFIX}{child}-0123456789abcdef",
+             "alive": f"{_shared.NAME_PREFIX}{os.getppid()}-0123456789abcdef",
+             "not a pid": f"{_shared.NAME_PREFIX}12x4-0123456789abcdef"}
+    for name in names.values():
+        with open(os.path.join(_shared.SHM_DIR, name), "wb"):
+            pass
+    try:
+        assert _shared.remove_orphans() == 1
+        left = set(os.listdir(_shared.SHM_DIR))
+        assert names["dead"] not in left
+        assert names["alive"] in left and names["not a pid"] in left
+    finally:
+        for name in names.values():
+            try:
+                os.unlink(os.path.join(_shared.SHM_DIR, name))
+            except FileNotFoundError:
+                pass
+
+
 def test_a_segment_starts_with_its_token():
     segment = _shared.Segment(1 << 20)
     try:

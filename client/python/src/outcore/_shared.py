@@ -90,6 +90,44 @@ def _remove_file(path: str, pid: int) -> None:
         pass
 
 
+_orphans_removed_in: int | None = None  # the pid that already removed orphans
+
+
+def remove_orphans() -> int:
+    """Unlinks segments that Python clients left behind when they died
+    without closing them (outcore-py-PID-... of this user whose PID is not
+    running); the same rule as SharedMemoryObject::remove_orphans for the C++
+    client. Returns how many it removed."""
+    removed = 0
+    prefix = NAME_PREFIX
+    try:
+        names = os.listdir(SHM_DIR)
+    except OSError:
+        return 0
+    for name in names:
+        if not name.startswith(prefix):
+            continue
+        pid_text, dash, _ = name[len(prefix):].partition("-")
+        if not dash or not pid_text.isdigit() or not 0 < len(pid_text) <= 9:
+            continue
+        try:
+            os.kill(int(pid_text), 0)
+            continue  # alive
+        except ProcessLookupError:
+            pass
+        except OSError:
+            continue  # someone else's process: alive
+        path = os.path.join(SHM_DIR, name)
+        try:
+            info = os.lstat(path)
+            if info.st_uid == os.geteuid() and (info.st_mode & 0o170000) == 0o100000:
+                os.unlink(path)
+                removed += 1
+        except OSError:
+            pass
+    return removed
+
+
 class Segment:
     """One mapped shared-memory object of `size` bytes, named `name`."""
 
@@ -100,6 +138,10 @@ class Segment:
         cannot be made: no /dev/shm, no room in it, a mapping refused..."""
         if size < HEADER_BYTES:
             raise ValueError(f"segment size must be at least {HEADER_BYTES}, got {size}")
+        global _orphans_removed_in
+        if _orphans_removed_in != os.getpid():
+            _orphans_removed_in = os.getpid()
+            remove_orphans()
         self.name = new_segment_name()
         self.path = os.path.join(SHM_DIR, self.name[1:])
         self.size = size
