@@ -38,7 +38,7 @@ done
 [ -n "$address" ] || { cat "$log"; echo "outcore serve did not start" >&2; exit 1; }
 echo "serving $scene on $address"
 echo
-echo "== outcore query (1 M camera rays over gRPC, C++ client)"
+echo "== outcore query (1 M camera rays, C++ client: one gRPC call, rays and hits through shared memory on this host)"
 "$bin" query --server "$address" --rays "$work/camera.npy" -o "$work/hits.npy" --stats
 echo
 echo "== outcore.SceneClient (the same rays from Python)"
@@ -54,10 +54,12 @@ with outcore.SceneClient(address, timeout=600) as scene:
     t0 = time.perf_counter()
     ans = scene.cast_rays(rays)
     seconds = time.perf_counter() - t0
+    shared = scene.last_call_shared
     occluded = scene.test_occlusions(rays[::10])  # every 10th pixel
     stats = scene.stats()
 hit = np.flatnonzero(np.isfinite(ans["t_hit"]))
-print(f"cast_rays: {rays.shape[0]} rays in {seconds:.2f} s ({rays.shape[0] / seconds / 1e6:.2f} M rays/s), "
+print(f"cast_rays: {rays.shape[0]} rays in {seconds:.2f} s ({rays.shape[0] / seconds / 1e6:.2f} M rays/s, "
+      f"{'through shared memory' if shared else 'over gRPC bytes'}), "
       f"{hit.size} hit; test_occlusions on every 10th ray: {int(occluded.sum())} of {occluded.size} occluded")
 for i in hit[:: max(1, hit.size // 5)][:5]:
     print(f"ray {i}: t={ans['t_hit'][i]:.4f} geometry {ans['geometry_ids'][i]} primitive {ans['primitive_ids'][i]} "

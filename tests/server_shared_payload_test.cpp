@@ -357,6 +357,10 @@ TEST(ServerSharedPayloadOff, ANoSharedPayloadsServerRefusesThemAndClientsFallBac
   EXPECT_EQ(status.error_code(), grpc::StatusCode::FAILED_PRECONDITION);
   EXPECT_NE(status.error_message().find("--no-shared-payloads"), std::string::npos) << status.error_message();
   EXPECT_TRUE(carries_refusal(context)) << "a refusal tells clients to send bytes";
+  // Channels closed first: gRPC's shutdown waits out its drain deadline for
+  // connections still open.
+  stub.reset();
+  client->reset();
   EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
 }
 
