@@ -1,6 +1,8 @@
 #include "client/cpp/scene_client.h"
 
 #include <grpcpp/grpcpp.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <bit>
@@ -42,6 +44,24 @@ constexpr uint64_t answers_offset(uint64_t ray_bytes) {
 uint64_t object_size(uint64_t bytes) {
   const uint64_t step = std::max<uint64_t>(uint64_t{1} << 20, std::bit_ceil(bytes) / 8);
   return (bytes + step - 1) / step * step;
+}
+
+// memcpy over the cores for the shared-memory copies (32 MiB each way for
+// 1 M hits: about 7 ms on one core of the development machine, where the
+// server is idle meanwhile).
+void parallel_copy(void* destination, const void* source, std::size_t bytes) {
+  constexpr std::size_t kStep = std::size_t{1} << 20;
+  if (bytes <= 2 * kStep) {
+    std::memcpy(destination, source, bytes);
+    return;
+  }
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (bytes + kStep - 1) / kStep),
+                    [&](const tbb::blocked_range<std::size_t>& steps) {
+                      const std::size_t first = steps.begin() * kStep;
+                      const std::size_t last = std::min(bytes, steps.end() * kStep);
+                      std::memcpy(static_cast<char*>(destination) + first,
+                                  static_cast<const char*>(source) + first, last - first);
+                    });
 }
 
 const char* grpc_code_name(grpc::StatusCode code) {
@@ -345,7 +365,7 @@ Status SceneClient::run_shared(std::span<const Ray> rays, std::span<uint8_t> out
     *send_bytes = true;
     return Status::Ok();
   }
-  std::memcpy((*object)->data() + kRaysOffset, rays.data(), rays.size_bytes());
+  parallel_copy((*object)->data() + kRaysOffset, rays.data(), rays.size_bytes());
   v1::QueryRequest request;
   v1::RayBatch* batch = request.mutable_batch();
   batch->set_layout_version(1);
@@ -381,7 +401,7 @@ Status SceneClient::run_shared(std::span<const Ray> rays, std::span<uint8_t> out
                           "), answers_in_shared " + (response.answers_in_shared() ? "true" : "false") + ", " +
                           std::to_string(payload(response).size()) + " payload bytes");
   }
-  std::memcpy(out.data(), (*object)->data() + answers_at, n * out_bytes_per_ray);
+  parallel_copy(out.data(), (*object)->data() + answers_at, n * out_bytes_per_ray);
   give_back_object(std::move(*object));
   add_stats(response.stats(), stats);
   if (stats != nullptr) stats->shared = true;
