@@ -172,7 +172,13 @@ class Segment:
     def read_answers(self, dtype: np.dtype, count: int, offset: int) -> np.ndarray:
         """A read-only COPY of `count` records of `dtype` at `offset`: results
         never alias the segment, which the next call reuses."""
-        out = np.array(np.frombuffer(self._map, dtype=dtype, count=count, offset=offset))
+        # Copied as raw bytes, then viewed as records: numpy copies a
+        # structured dtype with a subarray field record by record (50-100 ms
+        # for 1 M hits against 8 ms for the bytes).
+        dtype = np.dtype(dtype)
+        raw = np.frombuffer(self._map, dtype=np.uint8, count=count * dtype.itemsize, offset=offset)
+        out = raw.copy().view(dtype)
+        del raw  # no export of the mapping outlives the call
         out.flags.writeable = False
         return out
 
