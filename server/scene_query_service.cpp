@@ -204,14 +204,15 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     return to_grpc_status(object.status().with_context("request"));
   }
   const uint64_t n = request.batch().ray_count();
-  OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n));
   const SharedBuffersLease buffers = take_shared_buffers();
   v1::QueryStats* wire_stats = response->mutable_stats();
   // Groups in order, so under strict mode the first bad ray found is the
-  // call's first (earlier groups had none).
-  for (uint64_t first = 0; first < n || first == 0; first += kSharedGroupRays) {
+  // call's first (earlier groups had none). An empty batch is one empty group.
+  const uint64_t groups = std::max<uint64_t>(1, (n + kSharedGroupRays - 1) / kSharedGroupRays);
+  for (uint64_t group = 0; group < groups; ++group) {
+    const uint64_t first = group * kSharedGroupRays;
     const uint64_t count = std::min(kSharedGroupRays, n - first);
-    if (first > 0) OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n - first));
+    OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n - first));
     const Status read = read_shared_rays(*object, request, first, count, buffers->rays);
     if (!read.ok()) return to_grpc_status(read.with_context("request"));
     const std::span<const Ray> rays(buffers->rays.data(), count);
@@ -229,7 +230,6 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
                              std::span<const uint8_t>(buffers->answers.data(), answer_bytes));
     if (!written.ok()) return to_grpc_status(written.with_context("request"));
     add_stats(stats, wire_stats);
-    if (n == 0) break;
   }
   response->set_layout_version(1);
   response->set_ray_count(n);

@@ -1,16 +1,15 @@
 #include "server/shared_payload.h"
 
-#include <arpa/inet.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <atomic>
 #include <cstdlib>
-#include <cstring>
 #include <mutex>
 #include <string>
 #include <tuple>
 
+#include "core/util/loopback_address.h"
 #include "server/ray_batch.h"
 
 namespace outcore::server {
@@ -77,38 +76,13 @@ std::string percent_decoded(std::string_view text) {
   return out;
 }
 
-bool is_loopback_ipv4(const in_addr& address) {
-  return (ntohl(address.s_addr) >> 24) == 127;
-}
-
 }  // namespace
 
 bool is_loopback_peer(std::string_view peer) {
   if (peer.starts_with("unix:") || peer.starts_with("unix-abstract:")) return true;
-  const bool v4 = peer.starts_with("ipv4:");
-  if (!v4 && !peer.starts_with("ipv6:")) return false;
-  const std::string rest = percent_decoded(peer.substr(5));
-  std::string host;
-  if (!rest.empty() && rest.front() == '[') {
-    const std::size_t close = rest.find(']');
-    if (close == std::string::npos) return false;
-    host = rest.substr(1, close - 1);
-  } else {
-    const std::size_t colon = rest.rfind(':');
-    host = colon == std::string::npos ? rest : rest.substr(0, colon);
-  }
-  // A scope ("fe80::1%eth0") is never loopback.
-  if (host.find('%') != std::string::npos) return false;
-  in_addr address4{};
-  if (inet_pton(AF_INET, host.c_str(), &address4) == 1) return is_loopback_ipv4(address4);
-  in6_addr address6{};
-  if (inet_pton(AF_INET6, host.c_str(), &address6) != 1) return false;
-  if (IN6_IS_ADDR_LOOPBACK(&address6)) return true;
-  if (IN6_IS_ADDR_V4MAPPED(&address6)) {
-    std::memcpy(&address4.s_addr, address6.s6_addr + 12, 4);
-    return is_loopback_ipv4(address4);
-  }
-  return false;
+  if (!peer.starts_with("ipv4:") && !peer.starts_with("ipv6:")) return false;
+  const std::string address = percent_decoded(peer.substr(5));
+  return is_loopback_ip(host_of(address));
 }
 
 Expected<SharedMemoryObject> open_shared_payload(const v1::QueryRequest& request,

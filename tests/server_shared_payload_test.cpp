@@ -24,8 +24,8 @@
 #include "outcore/v1/scene_query.grpc.pb.h"
 #include "proto/outcore/v1/shared_payload_wire.h"
 #include "server/shared_payload.h"
+#include "tests/support/packed_scene.h"
 #include "tests/support/server_process.h"
-#include "tests/support/subprocess.h"
 #include "tests/support/test_paths.h"
 #include "tests/support/test_rays.h"
 
@@ -33,7 +33,6 @@ namespace outcore {
 namespace {
 
 using testing::ServerProcess;
-using testing::TempDir;
 
 constexpr uint64_t kHeader = SharedMemoryObject::kHeaderBytes;
 
@@ -73,42 +72,34 @@ int own_objects_left() {
   return count;
 }
 
-// A packed sphere and the engine over it, for tests that start a server of
-// their own; null (with a test failure) when packing fails.
-struct SphereScene {
-  TempDir dir;
-  std::string store = dir.file("scene");
+// A scene packed by the real packer and the engine over it, for the tests'
+// servers and their serial answers; null (with a test failure) when either
+// step fails.
+struct ServedScene {
+  std::unique_ptr<testing::PackedScene> packed;
   std::unique_ptr<QueryEngine> engine;
 
-  static std::unique_ptr<SphereScene> pack() {
-    auto scene = std::make_unique<SphereScene>();
-    const testing::SubprocessResult packed =
-        testing::run_outcore({"pack", "gen:sphere?level=3", "-o", scene->store, "-q", "--no-sync"},
-                             std::chrono::milliseconds(120'000));
-    EXPECT_TRUE(packed.succeeded()) << packed.describe();
-    auto engine = QueryEngine::open(scene->store, EngineOptions{});
+  static std::unique_ptr<ServedScene> pack(const std::vector<std::string>& inputs,
+                                           uint32_t brick_triangles = 32768) {
+    auto scene = std::make_unique<ServedScene>();
+    scene->packed = testing::pack_test_scene(inputs, brick_triangles);
+    auto engine = QueryEngine::open(scene->packed->path, EngineOptions{});
     EXPECT_TRUE(engine.ok()) << engine.status().to_string();
-    if (!packed.succeeded() || !engine.ok()) return nullptr;
+    if (!engine.ok()) return nullptr;
     scene->engine = std::move(*engine);
     return scene;
   }
+  const std::string& store() const { return packed->path; }
 };
 
 class ServerSharedPayload : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new TempDir();
-    store_ = dir_->file("scene");
-    const testing::SubprocessResult packed =
-        testing::run_outcore({"pack", "gen:sphere?level=3", "gen:torus?cx=3", "-o", store_, "--brick-tris",
-                              "200", "-q", "--no-sync"},
-                             std::chrono::milliseconds(120'000));
-    ASSERT_TRUE(packed.succeeded()) << packed.describe();
-    auto engine = QueryEngine::open(store_, EngineOptions{});
-    ASSERT_TRUE(engine.ok()) << engine.status().to_string();
-    engine_ = engine->release();
+    scene_ = ServedScene::pack({"gen:sphere?level=3", "gen:torus?cx=3"}, 200).release();
+    ASSERT_NE(scene_, nullptr);
+    engine_ = scene_->engine.get();
     std::string error;
-    server_ = ServerProcess::start(store_, {}, error).release();
+    server_ = ServerProcess::start(scene_->store(), {}, error).release();
     ASSERT_NE(server_, nullptr) << error;
   }
   static void TearDownTestSuite() {
@@ -116,11 +107,10 @@ class ServerSharedPayload : public ::testing::Test {
       EXPECT_EQ(server_->stop(SIGTERM), 0) << server_->log();
     }
     delete server_;
-    delete engine_;
-    delete dir_;
+    delete scene_;
     server_ = nullptr;
     engine_ = nullptr;
-    dir_ = nullptr;
+    scene_ = nullptr;
   }
   void SetUp() override {
     ASSERT_NE(server_, nullptr) << "suite setup failed";
@@ -173,15 +163,13 @@ class ServerSharedPayload : public ::testing::Test {
               bytes_of(serial_hits(r).data(), r.size() * sizeof(Hit)));
   }
 
-  static TempDir* dir_;
-  static std::string store_;
+  static ServedScene* scene_;
   static QueryEngine* engine_;
   static ServerProcess* server_;
   std::unique_ptr<v1::SceneQuery::Stub> stub_;
 };
 
-TempDir* ServerSharedPayload::dir_ = nullptr;
-std::string ServerSharedPayload::store_;
+ServedScene* ServerSharedPayload::scene_ = nullptr;
 QueryEngine* ServerSharedPayload::engine_ = nullptr;
 ServerProcess* ServerSharedPayload::server_ = nullptr;
 
@@ -323,11 +311,11 @@ TEST_F(ServerSharedPayload, MalformedSharedRequestsAreNamedErrorsAndTheServerKee
 }
 
 TEST(ServerSharedPayloadOff, ANoSharedPayloadsServerRefusesThemAndClientsFallBackToBytes) {
-  const std::unique_ptr<SphereScene> scene = SphereScene::pack();
+  const std::unique_ptr<ServedScene> scene = ServedScene::pack({"gen:sphere?level=3"});
   ASSERT_NE(scene, nullptr);
   const std::unique_ptr<QueryEngine>& engine = scene->engine;
   std::string error;
-  auto server = ServerProcess::start(scene->store, {"--no-shared-payloads"}, error);
+  auto server = ServerProcess::start(scene->store(), {"--no-shared-payloads"}, error);
   ASSERT_NE(server, nullptr) << error;
   const std::vector<Ray> r = testing::make_test_rays(engine->store().manifest().bounds, 20'000, 9);
   std::vector<Hit> want(r.size());
@@ -409,11 +397,11 @@ bool ipv6_loopback_available() {
 
 TEST(ServerSharedPayloadIpv6, AClientOnIpv6LoopbackGoesThroughSharedMemory) {
   if (!ipv6_loopback_available()) GTEST_SKIP() << "this host has no IPv6 loopback";
-  const std::unique_ptr<SphereScene> scene = SphereScene::pack();
+  const std::unique_ptr<ServedScene> scene = ServedScene::pack({"gen:sphere?level=3"});
   ASSERT_NE(scene, nullptr);
   const std::unique_ptr<QueryEngine>& engine = scene->engine;
   std::string error;
-  auto server = ServerProcess::start(scene->store, {"--listen", "[::1]:0"}, error);
+  auto server = ServerProcess::start(scene->store(), {"--listen", "[::1]:0"}, error);
   ASSERT_NE(server, nullptr) << error;
   ASSERT_TRUE(server->address().starts_with("[::1]:")) << server->address();
   const std::vector<Ray> r = testing::make_test_rays(engine->store().manifest().bounds, 20'000, 13);

@@ -3,19 +3,17 @@
 #include <grpcpp/grpcpp.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <bit>
+#include <cctype>
 #include <chrono>
 #include <cstring>
 #include <string_view>
 #include <thread>
 
-#include <arpa/inet.h>
-#include <unistd.h>
-
-#include <cctype>
-
+#include "core/util/loopback_address.h"
 #include "proto/outcore/v1/query_stats_fields.h"
 #include "proto/outcore/v1/shared_payload_wire.h"
 
@@ -245,28 +243,13 @@ Status SceneClient::occluded(std::span<const Ray> rays, std::span<uint8_t> occlu
 
 namespace {
 
-// "host:port", "[v6]:port", "host" or a bare IPv6 address -> the host.
-std::string_view host_of(std::string_view host_port) {
-  if (host_port.starts_with("[")) {
-    const auto end = host_port.find(']');
-    return end == std::string_view::npos ? std::string_view() : host_port.substr(1, end - 1);
-  }
-  if (std::count(host_port.begin(), host_port.end(), ':') == 1)
-    return host_port.substr(0, host_port.find(':'));
-  return host_port;
-}
-
+// A numeric loopback address, or the name localhost (any case, with or
+// without the root's trailing dot).
 bool is_loopback_host(std::string_view host) {
   std::string lower(host);
   std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
   if (lower.ends_with(".")) lower.pop_back();
-  if (lower == "localhost") return true;
-  in_addr address4{};
-  if (inet_pton(AF_INET, lower.c_str(), &address4) == 1) return (ntohl(address4.s_addr) >> 24) == 127;
-  in6_addr address6{};
-  if (inet_pton(AF_INET6, lower.c_str(), &address6) != 1) return false;
-  if (IN6_IS_ADDR_LOOPBACK(&address6)) return true;
-  return IN6_IS_ADDR_V4MAPPED(&address6) && address6.s6_addr[12] == 127;
+  return lower == "localhost" || is_loopback_ip(lower);
 }
 
 }  // namespace

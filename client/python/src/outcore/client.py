@@ -354,16 +354,22 @@ class SceneClient:
         if problem:
             raise OutcoreError("DATA_LOSS", f"malformed reply: {problem}", method)
 
+    def _unary_reply(self, query: _Query, data: bytes, expected_rays: int, shared: bool = False) -> _wire.Reply:
+        """A unary call's reply, decoded and checked (DATA_LOSS otherwise)."""
+        try:
+            reply = _wire.decode_reply(data)
+        except _wire.WireError as e:
+            raise OutcoreError("DATA_LOSS", f"malformed reply: {e}", query.unary) from None
+        self._check_reply(query, reply, expected_rays, query.unary, shared=shared)
+        return reply
+
     def _query_unary(self, query: _Query, rays: np.ndarray, strict: bool) -> np.ndarray:
         request = _wire.encode_query(rays, strict=strict)
         try:
             data = self._calls[query.unary](request, timeout=self.timeout)
-            reply = _wire.decode_reply(data)
         except grpc.RpcError as e:
             raise from_rpc_error(e, query.unary) from None
-        except _wire.WireError as e:
-            raise OutcoreError("DATA_LOSS", f"malformed reply: {e}", query.unary) from None
-        self._check_reply(query, reply, rays.shape[0], query.unary)
+        reply = self._unary_reply(query, data, rays.shape[0])
         self.last_stats = _message_to_dict(pb.QueryStats.FromString(reply.stats))
         self._last_call_shared = False
         return reply.payload(query.record_dtype)
@@ -415,11 +421,7 @@ class SceneClient:
                     return None
                 raise from_rpc_error(e, query.unary) from None
             reusable = True
-            try:
-                reply = _wire.decode_reply(data)
-            except _wire.WireError as e:
-                raise OutcoreError("DATA_LOSS", f"malformed reply: {e}", query.unary) from None
-            self._check_reply(query, reply, n, query.unary, shared=True)
+            reply = self._unary_reply(query, data, n, shared=True)
             out = segment.read_answers(query.record_dtype, n, answers_offset)
         finally:
             self._shared_pool.give(segment, reusable)
