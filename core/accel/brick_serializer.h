@@ -5,7 +5,10 @@
 //
 // A loaded accel must answer every query bitwise as the built one does and
 // report the same memory_bytes(), so the cache's accounting does not depend on
-// where a brick came from.
+// where a brick came from. A loader may use the bytes in place (no copy) when
+// the caller hands it their owner (SerializedBrick::owner, e.g. the mapped
+// subtree file): the accel then keeps the owner alive and memory_bytes()
+// covers what the owner holds.
 //
 // Thread-safety: save() and load() may run on many threads at once.
 #pragma once
@@ -21,6 +24,18 @@
 
 namespace outcore {
 
+// Bytes save() wrote, handed back to load().
+struct SerializedBrick {
+  std::span<const char> bytes;
+  // What keeps `bytes` alive. Null: they live only for the load() call, so
+  // the accel copies them; set: the accel may keep it and read them in place.
+  std::shared_ptr<const void> owner;
+  // These exact bytes passed a full load() before (the subtree tier knows the
+  // file is unchanged since it wrote or checked it): the structural checks
+  // may be skipped. Size and layout are still checked.
+  bool known_good = false;
+};
+
 class BrickSerializer {
  public:
   virtual ~BrickSerializer() = default;
@@ -32,7 +47,7 @@ class BrickSerializer {
   virtual Status save(const BrickAccel& accel, std::ostream& out) const = 0;
   // Reads what save() wrote for brick `brick_id` of `triangle_count`
   // triangles. A malformed payload is INVALID_ARGUMENT, never a crash.
-  virtual Expected<std::unique_ptr<BrickAccel>> load(std::span<const char> payload, uint32_t brick_id,
+  virtual Expected<std::unique_ptr<BrickAccel>> load(const SerializedBrick& payload, uint32_t brick_id,
                                                      uint32_t triangle_count) const = 0;
 };
 

@@ -19,9 +19,10 @@
 // file order. bytes: the brick's accounted bytes (after the build on a miss,
 // the resident size on a hit). reserved_bytes: the builder's upper bound the
 // cache reserves before building it (BrickBuilder::reserve_bytes).
-// build_seconds: measured load + build time on a miss (the subtree file's
-// load time on a load), 0 otherwise, written with 17 significant digits so a
-// replay feeds GDSF the very same cost. outcome: miss (this request built the
+// build_seconds: measured load + build time on a miss (with a subtree tier,
+// plus writing the subtree file; on a load, the file's load time), 0
+// otherwise, written with 17 significant digits so a replay feeds GDSF the
+// very same cost. outcome: miss (this request built the
 // brick), load (this request loaded it from the subtree tier instead of
 // building it; subtree_tier.h), hit (it was ready), wait (it was being built
 // by another thread and this request waited for that build). Version 2 added

@@ -43,6 +43,16 @@ Expected<std::unique_ptr<BrickAccel>> load_and_build(const SceneStore& store, co
       return built.status().with_context("building " + brick + " with '" + builder.name() + "'");
     if (*built == nullptr)
       return internal_error("builder '" + builder.name() + "' returned nothing for " + brick);
+    if (tier != nullptr) {
+      // Keep the saved file (mapped) rather than the built copy: see
+      // subtree_tier.h. The tier is a cache: a failure to save costs only the
+      // saving, never the build.
+      try {
+        if (std::unique_ptr<BrickAccel> saved = tier->store(key, **built)) return saved;
+      } catch (const std::exception& e) {
+        spdlog::warn("subtree tier: saving {} threw: {}", brick, e.what());
+      }
+    }
     return built;
   } catch (const std::bad_alloc&) {
     return resource_exhausted("out of memory while loading or building " + brick);
@@ -209,16 +219,6 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   lock.unlock();
   changed_.notify_all();
   hand_over(std::move(chunk));
-  // Saved while pinned (it cannot be evicted meanwhile), after waiters have
-  // been let in: the write delays only this acquirer.
-  if (tier_ && !loaded) {
-    try {
-      tier_->store(key, *pin.accel_);
-    } catch (const std::exception& e) {
-      spdlog::warn("subtree tier: saving brick {} threw: {}", brick_id, e.what());
-    }
-  }
-
   if (overran) {
     spdlog::warn(
         "brick cache: builder '{}' built brick {} ({} triangles) into {} bytes, more than its "

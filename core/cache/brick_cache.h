@@ -20,12 +20,12 @@
 //   store is OUT_OF_RANGE (as in SceneStore::load_brick).
 // - Subtree tier (optional, enable_subtree_tier; subtree_tier.h): on a miss
 //   the brick is loaded from the tier's directory when it holds a valid file,
-//   else loaded from the store and built, and the built brick is then saved to
-//   the tier by the thread that built it (outside the lock, while it holds the
-//   pin). A loaded brick is accounted exactly as a built one (the serialiser
-//   guarantees the same memory_bytes()); the reservation covers the load's
-//   heap peak too (the file is mapped, not read into the heap; its pages are
-//   file-backed and reclaimable, and unmapped as soon as the brick is read).
+//   else loaded from the store, built and saved to the tier, by the thread
+//   that missed (outside the lock; acquirers of the same brick wait for the
+//   save too). Either way the cache keeps the tier's file mapped in place
+//   (nothing copied to the heap; eviction unmaps it) unless the save failed.
+//   A loaded brick is accounted exactly as a built one (the serialiser
+//   guarantees the same memory_bytes(), which covers the mapping).
 // - Counters: hits + misses counts successful acquisitions; failed ones are in
 //   neither. builds, bytes_built and build_seconds count successful builds;
 //   misses served by the tier are in subtree.loads instead (so, once idle,

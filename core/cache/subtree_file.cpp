@@ -5,6 +5,7 @@
 
 #include <cstring>
 #include <istream>
+#include <memory>
 #include <new>
 #include <ostream>
 
@@ -18,6 +19,10 @@ namespace {
 
 constexpr std::size_t kPreambleBytes = sizeof(kSubtreeMagic) + sizeof(uint32_t);
 constexpr std::size_t kTrailerBytes = sizeof(uint64_t);
+
+uint64_t aligned(uint64_t offset) {
+  return (offset + kSubtreePayloadAlignment - 1) / kSubtreePayloadAlignment * kSubtreePayloadAlignment;
+}
 
 SubtreeReadResult rejected(SubtreeRejection why, const std::string& path, const std::string& message) {
   SubtreeReadResult result;
@@ -59,6 +64,9 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
   } catch (const std::exception& e) {
     return io_error("writing " + path + ": " + e.what());
   }
+  static constexpr char kZeros[kSubtreePayloadAlignment] = {};
+  const uint64_t written = file.size();
+  out.write(kZeros, static_cast<std::streamsize>(aligned(written) - written));
   Status saved = serializer.save(accel, out);
   if (saved.ok() && !out) saved = io_error("writing " + path + " failed");
   if (!saved.ok()) {
@@ -78,7 +86,15 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
     if (mapped.status().code() == StatusCode::kNotFound) return SubtreeReadResult{};
     return rejected(SubtreeRejection::kCorrupt, path, mapped.status().message());
   }
-  const std::span<const char> bytes = mapped->bytes();
+  return read_subtree_file(std::make_shared<const MappedFile>(std::move(mapped).value()), path, key,
+                           serializer,
+                           /*known_good=*/false);
+}
+
+SubtreeReadResult read_subtree_file(std::shared_ptr<const MappedFile> file, const std::string& path,
+                                    const SubtreeKey& key, const BrickSerializer& serializer,
+                                    bool known_good) {
+  const std::span<const char> bytes = file->bytes();
   if (bytes.size() < kPreambleBytes + kTrailerBytes) {
     return rejected(SubtreeRejection::kCorrupt, path,
                     "truncated (" + std::to_string(bytes.size()) + " bytes, no header)");
@@ -94,10 +110,13 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
                         std::to_string(kSubtreeFormatVersion));
   }
   const std::size_t checked = bytes.size() - kTrailerBytes;
-  uint64_t stored = 0;
-  std::memcpy(&stored, bytes.data() + checked, sizeof(stored));
-  if (checksum64(bytes.data(), checked) != stored) {
-    return rejected(SubtreeRejection::kCorrupt, path, "checksum mismatch (truncated or altered)");
+  if (!known_good) {
+    file->will_need();
+    uint64_t stored = 0;
+    std::memcpy(&stored, bytes.data() + checked, sizeof(stored));
+    if (checksum64(bytes.data(), checked) != stored) {
+      return rejected(SubtreeRejection::kCorrupt, path, "checksum mismatch (truncated or altered)");
+    }
   }
   const std::span<const char> body = bytes.subspan(kPreambleBytes, checked - kPreambleBytes);
   SubtreeKey found;
@@ -112,11 +131,16 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
   if (!(found == key)) {
     return rejected(SubtreeRejection::kStale, path, "holds " + describe(found) + "; wanted " + describe(key));
   }
+  const std::size_t payload_offset = aligned(checked - buffer.remaining());
+  if (payload_offset > checked) {
+    return rejected(SubtreeRejection::kCorrupt, path, "truncated (no payload after the header)");
+  }
   SubtreeReadResult result;
   result.file_bytes = bytes.size();
   try {
-    Expected<std::unique_ptr<BrickAccel>> loaded =
-        serializer.load(body.subspan(body.size() - buffer.remaining()), key.brick_id, key.triangle_count);
+    const SerializedBrick payload{bytes.subspan(payload_offset, checked - payload_offset), std::move(file),
+                                  known_good};
+    Expected<std::unique_ptr<BrickAccel>> loaded = serializer.load(payload, key.brick_id, key.triangle_count);
     if (!loaded.ok()) return rejected(SubtreeRejection::kCorrupt, path, loaded.status().message());
     result.accel = std::move(loaded).value();
   } catch (const std::bad_alloc&) {

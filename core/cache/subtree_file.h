@@ -1,7 +1,7 @@
 // Subtree files: one built brick structure saved by the subtree tier
 // (subtree_tier.h), so a later miss can load it instead of building it again.
 //
-// Layout (version 1; all integers little-endian, as cereal's binary archive
+// Layout (version 2; all integers little-endian, as cereal's binary archive
 // writes them on the little-endian hosts the store already requires):
 //
 //   magic            8 bytes "OCSUBTR\x1a"
@@ -10,31 +10,41 @@
 //   source_checksum  uint64    | cereal binary archive of SubtreeKey: the
 //   triangle_count   uint32    | store brick it was built from (the
 //   structure_key    string   -'  manifest's XXH3-64 of the brick) and how
+//   zero bytes       to the next multiple of 64 (kSubtreePayloadAlignment)
 //   payload          the BrickSerializer's bytes (to the trailer)
 //   checksum         uint64 XXH3-64 of every byte before it
+//
+// The payload starts 64-byte aligned in the file, hence in a mapping of it,
+// so a serialiser can use its arrays in place (the bvh brick does).
 //
 // A file is used only when magic, version and checksum are right and its key
 // equals the one asked for: the same brick id, the same source bytes (so a
 // file from another store, or from before a repack, is never used unless the
 // brick is bitwise the same, when the structure is too) and the same
 // structure key (structure, payload version and every option). Anything else
-// is a rejection with a reason; the caller rebuilds.
+// is a rejection with a reason; the caller rebuilds. A caller that knows the
+// mapped file is one it wrote or fully checked before, unchanged since
+// (same FileIdentity), may skip the checksum and the serialiser's structural
+// checks (known_good): a reload then costs a mapping and a header check.
 //
 // Thread-safety: functions of their arguments; concurrent calls on different
 // paths are independent.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
 
 #include "core/accel/brick_serializer.h"
+#include "core/util/mapped_file.h"
 #include "core/util/status.h"
 
 namespace outcore {
 
 inline constexpr char kSubtreeMagic[8] = {'O', 'C', 'S', 'U', 'B', 'T', 'R', '\x1a'};
-inline constexpr uint32_t kSubtreeFormatVersion = 1;
+inline constexpr uint32_t kSubtreeFormatVersion = 2;
+inline constexpr std::size_t kSubtreePayloadAlignment = 64;
 
 struct SubtreeKey {
   uint32_t brick_id = 0;
@@ -75,5 +85,10 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
 // Reads `path` if it holds `key`; never throws, never trusts the file.
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
                                     const BrickSerializer& serializer);
+// The same over a file the caller mapped (`path` names it in messages); the
+// loaded accel may keep `file` and read it in place. known_good: see above.
+SubtreeReadResult read_subtree_file(std::shared_ptr<const MappedFile> file, const std::string& path,
+                                    const SubtreeKey& key, const BrickSerializer& serializer,
+                                    bool known_good);
 
 }  // namespace outcore

@@ -70,7 +70,7 @@ Expected<std::unique_ptr<SubtreeTier>> SubtreeTier::open(const SubtreeTierOption
   std::sort(found.begin(), found.end());
   std::lock_guard lock(tier->mutex_);
   for (const auto& [modified, file] : found) {
-    tier->files_[file.first] = {file.second, ++tier->use_clock_};
+    tier->files_[file.first] = {file.second, ++tier->use_clock_, std::nullopt};
     ++tier->counters_.files;
     tier->counters_.bytes += file.second;
   }
@@ -91,17 +91,37 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
   const std::string name = file_name(key);
   const std::string path = path_of(key);
   const auto start = Clock::now();
-  SubtreeReadResult read = read_subtree_file(path, key, serializer_);
+  SubtreeReadResult read;
+  bool known_good = false;
+  FileIdentity identity;
+  Expected<MappedFile> mapped = MappedFile::open(path);
+  if (mapped.ok()) {
+    identity = mapped->identity();
+    {
+      std::lock_guard lock(mutex_);
+      const auto it = files_.find(name);
+      known_good = it != files_.end() && it->second.known_good == identity;
+    }
+    read = read_subtree_file(std::make_shared<const MappedFile>(std::move(mapped).value()), path, key,
+                             serializer_, known_good);
+  } else if (mapped.status().code() != StatusCode::kNotFound) {
+    read.rejection = SubtreeRejection::kCorrupt;
+    read.message = mapped.status().message();
+  }
   const double seconds = seconds_since(start);
 
   std::lock_guard lock(mutex_);
   switch (read.rejection) {
     case SubtreeRejection::kNone: {
       ++counters_.loads;
+      if (!known_good) ++counters_.loads_checked;
       counters_.bytes_read += read.file_bytes;
       counters_.load_seconds += seconds;
       const auto it = files_.find(name);
-      if (it != files_.end()) it->second.last_use = ++use_clock_;
+      if (it != files_.end()) {
+        it->second.last_use = ++use_clock_;
+        it->second.known_good = identity;
+      }
       return std::move(read.accel);
     }
     case SubtreeRejection::kAbsent:
@@ -120,12 +140,12 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
   return nullptr;
 }
 
-void SubtreeTier::store(const SubtreeKey& key, const BrickAccel& accel) {
+std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const BrickAccel& accel) {
   const std::string name = file_name(key);
   std::string temp;
   {
     std::lock_guard lock(mutex_);
-    if (files_.count(name) != 0) return;
+    if (files_.count(name) != 0) return nullptr;
     // Unique among processes (pid) and threads (sequence); hidden from the
     // index (no "brick-" prefix).
     temp = (fs::path(options_.directory) /
@@ -144,13 +164,15 @@ void SubtreeTier::store(const SubtreeKey& key, const BrickAccel& accel) {
       spdlog::warn("subtree tier: cannot save brick {}: {} (further failures are only counted)", key.brick_id,
                    written.message());
     }
-    return;
+    return nullptr;
   }
-  std::lock_guard lock(mutex_);
+  // Ours, under a name no one else uses: what we wrote, so known good.
+  Expected<FileIdentity> identity = file_identity(temp);
+  std::unique_lock lock(mutex_);
   if (options_.max_bytes > 0 && bytes > options_.max_bytes) {
     fs::remove(temp, error);
     ++counters_.writes_too_large;
-    return;
+    return nullptr;
   }
   evict_locked(bytes);
   fs::rename(temp, path_of(key), error);
@@ -161,15 +183,29 @@ void SubtreeTier::store(const SubtreeKey& key, const BrickAccel& accel) {
       spdlog::warn("subtree tier: cannot rename the file of brick {} into place: {}", key.brick_id,
                    error.message());
     }
-    return;
+    return nullptr;
   }
   forget_locked(name);  // a file another process wrote meanwhile was replaced
-  files_[name] = {bytes, ++use_clock_};
+  files_[name] = {bytes, ++use_clock_, identity.ok() ? std::optional<FileIdentity>(*identity) : std::nullopt};
   ++counters_.files;
   counters_.bytes += bytes;
   ++counters_.writes;
   counters_.bytes_written += bytes;
   counters_.write_seconds += seconds_since(start);
+  lock.unlock();
+  return map_written(key, identity.ok() ? std::optional<FileIdentity>(*identity) : std::nullopt);
+}
+
+std::unique_ptr<BrickAccel> SubtreeTier::map_written(const SubtreeKey& key,
+                                                     const std::optional<FileIdentity>& written) {
+  const std::string path = path_of(key);
+  Expected<MappedFile> mapped = MappedFile::open(path);
+  if (!mapped.ok()) return nullptr;  // deleted meanwhile (a bound, another process): keep the built one
+  // Another process may have replaced it since the rename: then check it.
+  const bool known_good = written.has_value() && mapped->identity() == *written;
+  SubtreeReadResult read = read_subtree_file(std::make_shared<const MappedFile>(std::move(mapped).value()),
+                                             path, key, serializer_, known_good);
+  return std::move(read.accel);
 }
 
 void SubtreeTier::evict_locked(uint64_t incoming) {

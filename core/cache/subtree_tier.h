@@ -4,11 +4,15 @@
 // eviction, or in a later process) it loads the file instead of building
 // again. Only for brick structures with a BrickSerializer ("bvh").
 //
-// - Written on build, not on eviction: the building thread already holds the
-//   brick pinned and is off the cache's lock, the file is there for the next
-//   process too, and evicting (which happens while another thread waits for
-//   room) stays as cheap as before. Each brick is written once per directory
-//   (a brick the tier knows is on disk is not written again).
+// - Written on build, not on eviction: the building thread is off the
+//   cache's lock, the file is there for the next process too, and evicting
+//   (which happens while another thread waits for room) stays as cheap as
+//   before. store() then hands back the written file mapped in place, which
+//   the cache keeps instead of the built copy: every resident brick is then
+//   page-cache pages that eviction unmaps, so the allocator never holds freed
+//   brick memory next to mapped bricks (process RSS stays within the budget
+//   plus a fixed overhead). Each brick is written once per directory (a brick
+//   the tier knows is on disk is not written again).
 // - Atomic: a file is written under a temporary name in the directory and
 //   renamed into place, so readers (of this or another process) see a whole
 //   file or none. Not fsync'ed: after a crash a file may be torn, which its
@@ -26,6 +30,14 @@
 // - A file that is corrupt, truncated, of another version or stale (another
 //   key under the expected name) is counted by reason, logged, deleted, and
 //   the caller builds instead: never a wrong answer.
+// - Loads are in place: the loaded accel reads the mapped file (the page
+//   cache's pages, faulted in as traversal touches them) and unmaps it when
+//   the cache evicts it, so the cache's budget still bounds what the process
+//   holds. A file is checked in full (checksum, structure) the first time this tier loads it;
+//   later loads of the same, unchanged file (same FileIdentity: inode, size,
+//   modification time), and loads of files this tier wrote, skip those checks
+//   and cost a mapping and a header check. A file replaced by another
+//   process (a new inode) is checked again.
 //
 // Thread-safety: all member functions may be called from any thread; one
 // mutex guards the index and is held for renames and deletions, never while
@@ -36,10 +48,12 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include "core/accel/brick_serializer.h"
 #include "core/cache/subtree_file.h"
+#include "core/util/mapped_file.h"
 #include "core/util/status.h"
 
 namespace outcore {
@@ -61,10 +75,11 @@ struct SubtreeTierCounters {
   uint64_t files_evicted = 0;
   uint64_t bytes_read = 0;  // of the files loaded
   uint64_t bytes_written = 0;
-  double load_seconds = 0;   // map + check + deserialise, summed over loads
-  double write_seconds = 0;  // serialise + write + rename, summed over writes
-  uint64_t files = 0;        // in the directory now, as far as this tier knows
-  uint64_t bytes = 0;        // their size
+  uint64_t loads_checked = 0;  // of the loads, those that checked the file in full
+  double load_seconds = 0;     // map + check + deserialise, summed over loads
+  double write_seconds = 0;    // serialise + write + rename, summed over writes
+  uint64_t files = 0;          // in the directory now, as far as this tier knows
+  uint64_t bytes = 0;          // their size
 
   uint64_t rejected() const { return rejected_corrupt + rejected_version + rejected_stale; }
 };
@@ -80,9 +95,12 @@ class SubtreeTier {
 
   // The structure saved under `key`, or nullptr when there is no valid one.
   std::unique_ptr<BrickAccel> load(const SubtreeKey& key);
-  // Saves `accel` under `key` unless a file for it is known to exist.
-  // Failures are counted and logged, never returned: the tier is a cache.
-  void store(const SubtreeKey& key, const BrickAccel& accel);
+  // Saves `accel` under `key` unless a file for it is known to exist, and
+  // returns the saved file loaded in place (the same answers and
+  // memory_bytes() as `accel`), or nullptr when nothing was saved; the caller
+  // then keeps `accel`. Failures are counted and logged, never returned: the
+  // tier is a cache.
+  std::unique_ptr<BrickAccel> store(const SubtreeKey& key, const BrickAccel& accel);
 
   // Where the file for `key` lives (tests, tools).
   std::string path_of(const SubtreeKey& key) const;
@@ -94,9 +112,13 @@ class SubtreeTier {
   struct FileEntry {
     uint64_t bytes = 0;
     uint64_t last_use = 0;
+    // The file as this tier wrote or last checked it in full.
+    std::optional<FileIdentity> known_good;
   };
 
   SubtreeTier(const SubtreeTierOptions& options, const BrickSerializer& serializer);
+  // The file store() just wrote, loaded in place; `written`: its identity then.
+  std::unique_ptr<BrickAccel> map_written(const SubtreeKey& key, const std::optional<FileIdentity>& written);
   std::string file_name(const SubtreeKey& key) const;
   // Under the lock: deletes least recently used files until `incoming` more
   // bytes fit in the bound.

@@ -4,9 +4,10 @@
 // budget with the tier equal unlimited-budget answers bitwise (every bvh
 // triangle test, a model and generator scenes); corrupt, truncated, other
 // version, wrong checksum and wrong options files are counted by reason and
-// rebuilt; concurrent misses of different bricks; a bounded directory; an
-// unwritable one; embree refused; access traces record loads and replay
-// consistently.
+// rebuilt; bricks read their file in place; a file is checked in full once,
+// then trusted until replaced; concurrent misses of different bricks; a
+// bounded directory; an unwritable one; embree refused; access traces record
+// loads and replay consistently.
 #include "core/cache/subtree_tier.h"
 
 #include <gtest/gtest.h>
@@ -21,6 +22,7 @@
 #include <vector>
 
 #include "core/accel/brick_accel_factory.h"
+#include "core/accel/bvh/bvh_brick.h"
 #include "core/cache/brick_cache.h"
 #include "core/cache/cache_simulator.h"
 #include "core/cache/eviction_policy.h"
@@ -173,6 +175,67 @@ TEST_F(SubtreeTierTest, EvictedBricksAreLoadedBackUnderATinyBudget) {
   EXPECT_GT(c.evictions, 0u);
   EXPECT_LE(c.peak_resident_bytes, budget);
   EXPECT_EQ(c.reservation_overruns, 0u);
+}
+
+TEST_F(SubtreeTierTest, BuiltAndLoadedBricksReadTheirFileInPlace) {
+  testing::TempDir tier;
+  auto cache = make_cache(kUnlimited, tier.path());
+  for (int round = 0; round < 2; ++round) {  // built and saved, then loaded by a second cache
+    for (uint32_t b = 0; b < bricks(); ++b) {
+      auto pin = cache->acquire(b);
+      ASSERT_TRUE(pin.ok()) << pin.status().to_string();
+      const auto* bvh = dynamic_cast<const BvhBrickAccel*>(&pin->accel());
+      ASSERT_NE(bvh, nullptr);
+      EXPECT_TRUE(bvh->in_place()) << "brick " << b << " round " << round
+                                   << ": the cache keeps the mapped file, not a heap copy";
+    }
+    cache = make_cache(kUnlimited, tier.path());
+  }
+  // Without a tier a build stays on the heap.
+  auto plain = make_cache(kUnlimited, "");
+  auto pin = plain->acquire(0);
+  ASSERT_TRUE(pin.ok());
+  EXPECT_FALSE(dynamic_cast<const BvhBrickAccel&>(pin->accel()).in_place());
+}
+
+TEST_F(SubtreeTierTest, FilesAreCheckedInFullOnceThenTrustedUntilReplaced) {
+  testing::TempDir tier;
+  auto probe = make_cache(kUnlimited, "");
+  const uint64_t budget = 2 * max_reservation(*probe);
+  {
+    // Files this tier wrote are known good: its reloads skip the full check.
+    auto writer = make_cache(budget, tier.path());
+    for (int round = 0; round < 2; ++round) acquire_all(*writer);
+    const SubtreeTierCounters c = writer->counters().subtree;
+    EXPECT_EQ(c.writes, bricks());
+    EXPECT_EQ(c.loads, bricks());
+    EXPECT_EQ(c.loads_checked, 0u);
+  }
+  auto reader = make_cache(budget, tier.path());
+  acquire_all(*reader);
+  EXPECT_EQ(reader->counters().subtree.loads_checked, bricks()) << "found at open: checked on first load";
+  acquire_all(*reader);
+  EXPECT_EQ(reader->counters().subtree.loads, 2u * bricks());
+  EXPECT_EQ(reader->counters().subtree.loads_checked, bricks()) << "unchanged since: trusted";
+
+  // Another process replaces two files (a new inode each): one with the same
+  // bytes, checked again and used; one corrupt, caught by the check that a
+  // stale trust would have skipped.
+  const std::string same = reader->subtree_tier()->path_of(key_of(*reader, 1));
+  const std::string bad = reader->subtree_tier()->path_of(key_of(*reader, 2));
+  const std::string same_bytes = testing::read_file_bytes(same);
+  std::string bad_bytes = testing::read_file_bytes(bad);
+  bad_bytes[bad_bytes.size() - 100] ^= 0x01;
+  for (const auto& [path, bytes] : {std::pair{same, same_bytes}, std::pair{bad, bad_bytes}}) {
+    testing::write_text_file(path + ".new", bytes);
+    fs::rename(path + ".new", path);
+  }
+  acquire_all(*reader);
+  const CacheCounters c = reader->counters();
+  EXPECT_EQ(c.subtree.loads_checked, bricks() + 1);
+  EXPECT_EQ(c.subtree.rejected_corrupt, 1u);
+  EXPECT_EQ(c.builds, 1u) << "the corrupt file's brick is rebuilt";
+  EXPECT_EQ(c.subtree.loads, 3u * bricks() - 1);
 }
 
 TEST_F(SubtreeTierTest, BadFilesFallBackToARebuildWithTheRightCounter) {

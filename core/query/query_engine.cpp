@@ -1216,6 +1216,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const SubtreeTierCounters& tier_before = counters_before.subtree;
   const SubtreeTierCounters& tier_after = counters_after.subtree;
   stats.subtree_loads = tier_after.loads - tier_before.loads;
+  stats.subtree_loads_checked = tier_after.loads_checked - tier_before.loads_checked;
   stats.subtree_writes = tier_after.writes - tier_before.writes;
   stats.subtree_rejects = tier_after.rejected() - tier_before.rejected();
   stats.subtree_bytes_read = tier_after.bytes_read - tier_before.bytes_read;
@@ -1247,7 +1248,8 @@ std::string QueryStats::to_json() const {
       .field("cache_hits", cache_hits)
       .field("cache_misses", cache_misses);
   j.field("brick_builds", brick_builds).field("evictions", evictions);
-  j.field("subtree_loads", subtree_loads).field("subtree_writes", subtree_writes);
+  j.field("subtree_loads", subtree_loads).field("subtree_loads_checked", subtree_loads_checked);
+  j.field("subtree_writes", subtree_writes);
   j.field("subtree_rejects", subtree_rejects).field("subtree_bytes_read", subtree_bytes_read);
   j.field("subtree_bytes_written", subtree_bytes_written);
   j.field("peak_bytes_resident", peak_bytes_resident).field("cache_budget_bytes", cache_budget_bytes);
@@ -1301,13 +1303,15 @@ std::string QueryStats::to_text() const {
     text += "  proxies: off\n";
   }
   if (subtree_loads + subtree_writes + subtree_rejects > 0) {
-    std::snprintf(buf, sizeof buf,
-                  "  subtree tier: %llu loads (%.1f MiB, %.3f s), %llu writes (%.1f MiB), %llu rejected; "
-                  "builds %.3f s\n",
-                  static_cast<unsigned long long>(subtree_loads), subtree_bytes_read / 1048576.0,
-                  seconds_subtree_loads, static_cast<unsigned long long>(subtree_writes),
-                  subtree_bytes_written / 1048576.0, static_cast<unsigned long long>(subtree_rejects),
-                  seconds_brick_builds);
+    std::snprintf(
+        buf, sizeof buf,
+        "  subtree tier: %llu loads (%llu checked in full; %.1f MiB, %.3f s), %llu writes (%.1f MiB), "
+        "%llu rejected; builds %.3f s\n",
+        static_cast<unsigned long long>(subtree_loads),
+        static_cast<unsigned long long>(subtree_loads_checked), subtree_bytes_read / 1048576.0,
+        seconds_subtree_loads, static_cast<unsigned long long>(subtree_writes),
+        subtree_bytes_written / 1048576.0, static_cast<unsigned long long>(subtree_rejects),
+        seconds_brick_builds);
     text += buf;
   }
   return text;

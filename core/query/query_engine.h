@@ -125,6 +125,7 @@ struct QueryStats {
   // by loading a file instead of building, files written, their bytes, and
   // files refused (corrupt, other version, stale; each then built).
   uint64_t subtree_loads = 0;
+  uint64_t subtree_loads_checked = 0;  // of the loads, those that checked the file in full (first loads)
   uint64_t subtree_writes = 0;
   uint64_t subtree_rejects = 0;
   uint64_t subtree_bytes_read = 0;

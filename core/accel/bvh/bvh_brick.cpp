@@ -44,12 +44,12 @@ void permute_in_place(std::vector<uint32_t>& order, std::vector<A>& a, std::vect
 }
 
 template <class Test>
-void intersect_all(const BvhTree& tree, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
+void intersect_all(const BvhTreeView& tree, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
   for (const uint32_t i : ray_ids) bvh_closest_hit<Test>(tree, rays[i], hits[i]);
 }
 
 template <class Test>
-void occluded_all(const BvhTree& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
+void occluded_all(const BvhTreeView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
                   uint8_t* occluded) {
   for (const uint32_t i : ray_ids) {
     if (occluded[i] == 0 && bvh_any_hit<Test>(tree, rays[i])) occluded[i] = 1;
@@ -115,6 +115,8 @@ Expected<std::unique_ptr<BvhBrickAccel>> BvhBrickAccel::build(BrickData&& brick,
   peak = std::max(peak, tree.memory_bytes() + built.peak_bytes);
   tree.nodes = std::move(built.nodes);
   permute_in_place(built.order, tree.triangles, tree.records);
+  accel->view_ = tree.view();
+  accel->memory_bytes_ = tree.memory_bytes() + kOverheadBytes;
   accel->build_peak_bytes_ = peak + kOverheadBytes;
   accel->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return accel;
@@ -124,6 +126,24 @@ std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_tree(BvhTree tree, TriangleTe
                                                         uint32_t triangle_count) {
   std::unique_ptr<BvhBrickAccel> accel(new BvhBrickAccel());
   accel->tree_ = std::move(tree);
+  accel->view_ = accel->tree_.view();
+  accel->memory_bytes_ = accel->tree_.memory_bytes() + kOverheadBytes;
+  accel->test_ = test;
+  accel->brick_id_ = brick_id;
+  accel->triangle_count_ = triangle_count;
+  accel->build_peak_bytes_ = accel->memory_bytes();
+  return accel;
+}
+
+std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_view(const BvhTreeView& view,
+                                                        std::shared_ptr<const void> owner, TriangleTest test,
+                                                        uint32_t brick_id, uint32_t triangle_count) {
+  std::unique_ptr<BvhBrickAccel> accel(new BvhBrickAccel());
+  accel->owner_ = std::move(owner);
+  accel->view_ = view;
+  // As a build of the same tree reports (its arrays are exactly sized).
+  accel->memory_bytes_ =
+      view.nodes.size_bytes() + view.triangles.size_bytes() + view.records.size_bytes() + kOverheadBytes;
   accel->test_ = test;
   accel->brick_id_ = brick_id;
   accel->triangle_count_ = triangle_count;
@@ -147,21 +167,21 @@ uint64_t BvhBrickAccel::reserve_bytes(uint64_t triangle_count) {
 }
 
 void BvhBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
-  if (tree_.nodes.empty()) return;
+  if (view_.nodes.empty()) return;
   switch (test_) {
-    case TriangleTest::kMt: return intersect_all<MtTriangleTest>(tree_, ray_ids, rays, hits);
-    case TriangleTest::kWatertight: return intersect_all<WatertightTriangleTest>(tree_, ray_ids, rays, hits);
-    case TriangleTest::kDouble: return intersect_all<DoubleTriangleTest>(tree_, ray_ids, rays, hits);
+    case TriangleTest::kMt: return intersect_all<MtTriangleTest>(view_, ray_ids, rays, hits);
+    case TriangleTest::kWatertight: return intersect_all<WatertightTriangleTest>(view_, ray_ids, rays, hits);
+    case TriangleTest::kDouble: return intersect_all<DoubleTriangleTest>(view_, ray_ids, rays, hits);
   }
 }
 
 void BvhBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
-  if (tree_.nodes.empty()) return;
+  if (view_.nodes.empty()) return;
   switch (test_) {
-    case TriangleTest::kMt: return occluded_all<MtTriangleTest>(tree_, ray_ids, rays, occluded);
+    case TriangleTest::kMt: return occluded_all<MtTriangleTest>(view_, ray_ids, rays, occluded);
     case TriangleTest::kWatertight:
-      return occluded_all<WatertightTriangleTest>(tree_, ray_ids, rays, occluded);
-    case TriangleTest::kDouble: return occluded_all<DoubleTriangleTest>(tree_, ray_ids, rays, occluded);
+      return occluded_all<WatertightTriangleTest>(view_, ray_ids, rays, occluded);
+    case TriangleTest::kDouble: return occluded_all<DoubleTriangleTest>(view_, ray_ids, rays, occluded);
   }
 }
 

@@ -15,8 +15,10 @@
 // rays calls the traversal templated on it: no per-ray dispatch.
 //
 // Memory: memory_bytes() = the tree's arrays (32 B per node, 56 B per
-// triangle) + kOverheadBytes. reserve_bytes(n) bounds it and the build peak
-// (see bvh_brick.cpp).
+// triangle) + kOverheadBytes, whether the accel owns them (a build) or reads
+// them in place from a mapped subtree file (from_view(); kOverheadBytes also
+// covers such a file's header, padding, trailer and last partial page).
+// reserve_bytes(n) bounds it and the build peak (see bvh_brick.cpp).
 //
 // Thread-safety: build() may run on many threads at once; a built accel is
 // immutable and intersect() / occluded() may run concurrently.
@@ -53,16 +55,23 @@ struct BvhBrickConfig {
 class BvhBrickAccel final : public BrickAccel {
  public:
   static constexpr uint64_t kMaxTriangles = 0xfffffffeu;
-  // This object and what the allocator keeps per allocation, with margin.
-  static constexpr uint64_t kOverheadBytes = 512;
+  // This object and what the allocator keeps per allocation, or a mapped
+  // subtree file's bytes beyond the arrays (header with the structure key,
+  // alignment padding, checksum, the rest of the last page), with margin.
+  static constexpr uint64_t kOverheadBytes = 8192;
 
   // Consumes the brick. INVALID_ARGUMENT when ids and triangles differ in
   // count or the config is invalid, OUT_OF_RANGE beyond kMaxTriangles.
   static Expected<std::unique_ptr<BvhBrickAccel>> build(BrickData&& brick, const BvhBrickConfig& config);
-  // A brick from a tree (e.g. deserialize_bvh()); the tree must be valid.
+  // A brick from a tree it owns; the tree must be valid (validate()).
   // triangle_count: the source brick's, degenerate triangles included (the
   // tree holds only the usable ones).
   static std::unique_ptr<BvhBrickAccel> from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id,
+                                                  uint32_t triangle_count);
+  // A brick that reads a valid view in place; `owner` keeps the viewed bytes
+  // alive (e.g. a mapped subtree file) for as long as the accel lives.
+  static std::unique_ptr<BvhBrickAccel> from_view(const BvhTreeView& view, std::shared_ptr<const void> owner,
+                                                  TriangleTest test, uint32_t brick_id,
                                                   uint32_t triangle_count);
   // Upper bound on memory_bytes() and build_peak_bytes() for n triangles.
   static uint64_t reserve_bytes(uint64_t triangle_count);
@@ -70,12 +79,14 @@ class BvhBrickAccel final : public BrickAccel {
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
 
-  uint64_t memory_bytes() const override { return tree_.memory_bytes() + kOverheadBytes; }
+  uint64_t memory_bytes() const override { return memory_bytes_; }
   double build_seconds() const override { return build_seconds_; }
   uint32_t triangle_count() const override { return triangle_count_; }
 
   // Beyond BrickAccel (statistics and tests):
-  const BvhTree& tree() const { return tree_; }
+  const BvhTreeView& view() const { return view_; }
+  // Whether the arrays are read in place from bytes someone else owns.
+  bool in_place() const { return owner_ != nullptr; }
   TriangleTest triangle_test() const { return test_; }
   uint32_t brick_id() const { return brick_id_; }
   uint64_t build_peak_bytes() const { return build_peak_bytes_; }
@@ -83,7 +94,10 @@ class BvhBrickAccel final : public BrickAccel {
  private:
   BvhBrickAccel() = default;
 
-  BvhTree tree_;
+  BvhTree tree_;                       // empty when in place
+  std::shared_ptr<const void> owner_;  // of the bytes view_ reads, when in place
+  BvhTreeView view_;
+  uint64_t memory_bytes_ = kOverheadBytes;
   TriangleTest test_ = TriangleTest::kWatertight;
   uint32_t brick_id_ = 0;
   uint32_t triangle_count_ = 0;  // including the degenerate ones left out

@@ -2,12 +2,48 @@
 
 #include <cereal/archives/binary.hpp>
 
+#include <array>
 #include <cstdio>
-#include <istream>
-
-#include "core/util/span_streambuf.h"
+#include <cstring>
+#include <ostream>
 
 namespace outcore {
+namespace {
+
+constexpr uint64_t kHeaderBytes = 64;
+constexpr uint64_t kMaxArrayElements = uint64_t{1} << 32;
+
+uint64_t align_up(uint64_t offset) {
+  constexpr uint64_t kAlign = BvhBrickSerializer::kInPlaceAlignment;
+  return (offset + kAlign - 1) / kAlign * kAlign;
+}
+
+// Where each array starts and where the payload ends, from the counts.
+struct PayloadLayout {
+  uint64_t nodes, triangles, records, end;
+
+  static PayloadLayout of(uint64_t node_count, uint64_t triangle_count, uint64_t record_count) {
+    PayloadLayout layout;
+    layout.nodes = kHeaderBytes;
+    layout.triangles = align_up(layout.nodes + node_count * sizeof(BvhNode));
+    layout.records = align_up(layout.triangles + triangle_count * sizeof(Triangle));
+    layout.end = layout.records + record_count * sizeof(BvhHitRecord);
+    return layout;
+  }
+};
+
+template <class Archive>
+void write_zeros(Archive& archive, uint64_t bytes) {
+  static constexpr std::array<char, BvhBrickSerializer::kInPlaceAlignment> kZeros{};
+  archive(cereal::binary_data(kZeros.data(), bytes));
+}
+
+template <class T>
+std::span<const T> array_at(std::span<const char> bytes, uint64_t offset, uint64_t count) {
+  return {reinterpret_cast<const T*>(bytes.data() + offset), static_cast<std::size_t>(count)};
+}
+
+}  // namespace
 
 BvhBrickSerializer::BvhBrickSerializer(const BvhBrickConfig& config) : config_(config) {
   char key[256];
@@ -29,9 +65,21 @@ Status BvhBrickSerializer::save(const BrickAccel& accel, std::ostream& out) cons
                             " uses triangle test " + std::string(triangle_test_name(bvh->triangle_test())) +
                             ", not " + std::string(triangle_test_name(config_.triangle_test)));
   }
+  const BvhTreeView& tree = bvh->view();
+  const PayloadLayout layout =
+      PayloadLayout::of(tree.nodes.size(), tree.triangles.size(), tree.records.size());
   try {
     cereal::BinaryOutputArchive archive(out);
-    archive(static_cast<uint8_t>(bvh->triangle_test()), bvh->tree());
+    archive(static_cast<uint8_t>(bvh->triangle_test()));
+    write_zeros(archive, 7);
+    archive(static_cast<uint64_t>(tree.nodes.size()), static_cast<uint64_t>(tree.triangles.size()),
+            static_cast<uint64_t>(tree.records.size()));
+    write_zeros(archive, kHeaderBytes - 32);
+    archive(cereal::binary_data(tree.nodes.data(), tree.nodes.size_bytes()));
+    write_zeros(archive, layout.triangles - (layout.nodes + tree.nodes.size_bytes()));
+    archive(cereal::binary_data(tree.triangles.data(), tree.triangles.size_bytes()));
+    write_zeros(archive, layout.records - (layout.triangles + tree.triangles.size_bytes()));
+    archive(cereal::binary_data(tree.records.data(), tree.records.size_bytes()));
   } catch (const std::exception& e) {
     return io_error(std::string("bvh serialiser: ") + e.what());
   }
@@ -39,35 +87,67 @@ Status BvhBrickSerializer::save(const BrickAccel& accel, std::ostream& out) cons
   return Status::Ok();
 }
 
-Expected<std::unique_ptr<BrickAccel>> BvhBrickSerializer::load(std::span<const char> payload,
+Expected<std::unique_ptr<BrickAccel>> BvhBrickSerializer::load(const SerializedBrick& payload,
                                                                uint32_t brick_id,
                                                                uint32_t triangle_count) const {
   const std::string what = "bvh serialiser: brick " + std::to_string(brick_id);
-  uint8_t test = 0;
-  BvhTree tree;
-  SpanStreambuf buffer(payload);
-  try {
-    std::istream in(&buffer);
-    cereal::BinaryInputArchive archive(in);
-    archive(test, tree);
-  } catch (const std::exception& e) {
-    return invalid_argument(what + ": cannot read the tree: " + e.what());
+  const std::span<const char> bytes = payload.bytes;
+  if (bytes.size() < kHeaderBytes) {
+    return invalid_argument(what + ": truncated (" + std::to_string(bytes.size()) + " bytes, no header)");
   }
-  if (buffer.remaining() != 0) {
-    return invalid_argument(what + ": " + std::to_string(buffer.remaining()) + " bytes after the tree");
+  const uint8_t test = static_cast<uint8_t>(bytes[0]);
+  uint64_t counts[3];
+  std::memcpy(counts, bytes.data() + 8, sizeof(counts));
+  for (const uint64_t count : counts) {
+    if (count > kMaxArrayElements) {
+      return invalid_argument(what + ": an array of " + std::to_string(count) + " elements");
+    }
+  }
+  const PayloadLayout layout = PayloadLayout::of(counts[0], counts[1], counts[2]);
+  if (layout.end > bytes.size()) {
+    return invalid_argument(what + ": truncated (" + std::to_string(bytes.size()) +
+                            " bytes, the tree needs " + std::to_string(layout.end) + ")");
+  }
+  if (layout.end < bytes.size()) {
+    return invalid_argument(what + ": " + std::to_string(bytes.size() - layout.end) +
+                            " bytes after the tree");
   }
   if (test != static_cast<uint8_t>(config_.triangle_test)) {
     return invalid_argument(what + ": triangle test " + std::to_string(test) + ", expected " +
                             std::string(triangle_test_name(config_.triangle_test)));
   }
-  if (tree.triangles.size() > triangle_count) {
-    return invalid_argument(what + ": " + std::to_string(tree.triangles.size()) +
-                            " triangles, more than the " + std::to_string(triangle_count) + " of the brick");
+  if (counts[1] > triangle_count) {
+    return invalid_argument(what + ": " + std::to_string(counts[1]) + " triangles, more than the " +
+                            std::to_string(triangle_count) + " of the brick");
   }
-  const Status valid = tree.validate();
-  if (!valid.ok()) return invalid_argument(what + ": " + valid.message());
+  const bool in_place =
+      payload.owner != nullptr && reinterpret_cast<uintptr_t>(bytes.data()) % kInPlaceAlignment == 0;
+  BvhTree copy;
+  BvhTreeView view;
+  if (in_place) {
+    view = {array_at<BvhNode>(bytes, layout.nodes, counts[0]),
+            array_at<Triangle>(bytes, layout.triangles, counts[1]),
+            array_at<BvhHitRecord>(bytes, layout.records, counts[2])};
+  } else {
+    // Unaligned or short-lived bytes: the accel gets its own copy.
+    copy.nodes.resize(counts[0]);
+    copy.triangles.resize(counts[1]);
+    copy.records.resize(counts[2]);
+    std::memcpy(copy.nodes.data(), bytes.data() + layout.nodes, counts[0] * sizeof(BvhNode));
+    std::memcpy(copy.triangles.data(), bytes.data() + layout.triangles, counts[1] * sizeof(Triangle));
+    std::memcpy(copy.records.data(), bytes.data() + layout.records, counts[2] * sizeof(BvhHitRecord));
+    view = copy.view();
+  }
+  if (!payload.known_good) {
+    const Status valid = view.validate();
+    if (!valid.ok()) return invalid_argument(what + ": " + valid.message());
+  }
+  if (in_place) {
+    return std::unique_ptr<BrickAccel>(
+        BvhBrickAccel::from_view(view, payload.owner, config_.triangle_test, brick_id, triangle_count));
+  }
   return std::unique_ptr<BrickAccel>(
-      BvhBrickAccel::from_tree(std::move(tree), config_.triangle_test, brick_id, triangle_count));
+      BvhBrickAccel::from_tree(std::move(copy), config_.triangle_test, brick_id, triangle_count));
 }
 
 }  // namespace outcore

@@ -10,7 +10,9 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <memory>
 #include <set>
+#include <span>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -43,6 +45,32 @@ std::string save(const BvhBrickSerializer& serializer, const BrickAccel& accel) 
   const Status saved = serializer.save(accel, out);
   EXPECT_TRUE(saved.ok()) << saved.to_string();
   return std::move(out).str();
+}
+
+// Bytes at a chosen offset from a 64-byte boundary, owned by a shared_ptr as
+// a mapped file would be.
+class AlignedBytes {
+ public:
+  AlignedBytes(const std::string& bytes, std::size_t misalign)
+      : storage_(bytes.size() + 128),
+        offset_(64 - reinterpret_cast<uintptr_t>(storage_.data()) % 64 + misalign) {
+    std::memcpy(storage_.data() + offset_, bytes.data(), bytes.size());
+    size_ = bytes.size();
+  }
+  std::span<const char> bytes() const { return {storage_.data() + offset_, size_}; }
+
+ private:
+  std::vector<char> storage_;
+  std::size_t offset_;
+  std::size_t size_ = 0;
+};
+
+SerializedBrick unowned(std::string_view bytes) {
+  return SerializedBrick{bytes, nullptr, false};
+}
+
+std::shared_ptr<const AlignedBytes> aligned_copy(const std::string& bytes) {
+  return std::make_shared<const AlignedBytes>(bytes, 0);
 }
 
 std::vector<Ray> rays_for(const BrickData& brick, uint64_t seed) {
@@ -86,14 +114,15 @@ TEST(BvhBrickSerializer, RoundTripAnswersBitwiseAndKeepsTheBytes) {
       copy.brick_id = 17;
       const auto built = build(std::move(copy), config_of(test));
       const std::string payload = save(serializer, *built);
-      auto loaded = serializer.load(payload, 17, built->triangle_count());
+      auto loaded = serializer.load(unowned(payload), 17, built->triangle_count());
       ASSERT_TRUE(loaded.ok()) << what << ": " << loaded.status().to_string();
       const auto& bvh = dynamic_cast<const BvhBrickAccel&>(**loaded);
       EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes()) << what;
       EXPECT_EQ((*loaded)->triangle_count(), built->triangle_count()) << what;
       EXPECT_EQ(bvh.brick_id(), 17u) << what;
       EXPECT_EQ(bvh.triangle_test(), test) << what;
-      EXPECT_EQ(bvh.tree().nodes.size(), built->tree().nodes.size()) << what;
+      EXPECT_EQ(bvh.view().nodes.size(), built->view().nodes.size()) << what;
+      EXPECT_FALSE(bvh.in_place()) << what << ": bytes without an owner are copied";
       expect_same_answers(*built, **loaded, rays_for(brick, 99), what);
     }
   }
@@ -102,7 +131,7 @@ TEST(BvhBrickSerializer, RoundTripAnswersBitwiseAndKeepsTheBytes) {
 TEST(BvhBrickSerializer, EmptyBrickRoundTrips) {
   const BvhBrickSerializer serializer(config_of(TriangleTest::kWatertight));
   const auto built = build(BrickData{}, config_of(TriangleTest::kWatertight));
-  auto loaded = serializer.load(save(serializer, *built), 0, 0);
+  auto loaded = serializer.load(unowned(save(serializer, *built)), 0, 0);
   ASSERT_TRUE(loaded.ok()) << loaded.status().to_string();
   EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes());
 }
@@ -115,14 +144,19 @@ TEST(BvhBrickSerializer, MalformedPayloadsAreErrorsNotCrashes) {
   const uint32_t n = built->triangle_count();
   for (const std::size_t cut :
        {std::size_t{0}, std::size_t{1}, std::size_t{9}, payload.size() / 2, payload.size() - 1}) {
-    EXPECT_FALSE(serializer.load(std::string_view(payload).substr(0, cut), 0, n).ok()) << "cut at " << cut;
+    EXPECT_FALSE(serializer.load(unowned(std::string_view(payload).substr(0, cut)), 0, n).ok())
+        << "cut at " << cut;
   }
-  EXPECT_FALSE(serializer.load(payload + "x", 0, n).ok()) << "trailing bytes";
-  EXPECT_FALSE(serializer.load(payload, 0, n - 1).ok()) << "more triangles than the brick has";
+  EXPECT_FALSE(serializer.load(unowned(payload + "x"), 0, n).ok()) << "trailing bytes";
+  EXPECT_FALSE(serializer.load(unowned(payload), 0, n - 1).ok()) << "more triangles than the brick has";
+  std::string huge = payload;
+  const uint64_t claimed = uint64_t{1} << 31;  // a node count far beyond the input
+  std::memcpy(huge.data() + 8, &claimed, sizeof(claimed));
+  EXPECT_FALSE(serializer.load(unowned(huge), 0, n).ok()) << "a count beyond the bytes";
   // A payload saved with another triangle test.
   const BvhBrickSerializer mt(config_of(TriangleTest::kMt));
   const std::string mt_payload = save(mt, *build(brick, config_of(TriangleTest::kMt)));
-  auto wrong = serializer.load(mt_payload, 0, n);
+  auto wrong = serializer.load(unowned(mt_payload), 0, n);
   ASSERT_FALSE(wrong.ok());
   EXPECT_NE(wrong.status().message().find("triangle test"), std::string::npos) << wrong.status().message();
   // Saving a brick of another config is refused.
@@ -130,10 +164,53 @@ TEST(BvhBrickSerializer, MalformedPayloadsAreErrorsNotCrashes) {
   EXPECT_FALSE(serializer.save(*build(brick, config_of(TriangleTest::kMt)), out).ok());
   // A structurally broken tree behind a well-formed archive.
   std::string broken = payload;
-  const std::size_t root_index = 1 + 8 + offsetof(BvhNode, index);  // test byte, node count, then nodes[0]
+  const std::size_t root_index = 64 + offsetof(BvhNode, index);  // the 64-byte header, then nodes[0]
   const uint32_t self = 0;
   std::memcpy(broken.data() + root_index, &self, sizeof(self));
-  EXPECT_FALSE(serializer.load(broken, 0, n).ok());
+  EXPECT_FALSE(serializer.load(unowned(broken), 0, n).ok());
+  // In place too, unless the caller vouches for the bytes.
+  const auto owned = aligned_copy(broken);
+  EXPECT_FALSE(serializer.load({owned->bytes(), owned, false}, 0, n).ok());
+}
+
+TEST(BvhBrickSerializer, AlignedOwnedPayloadsAreUsedInPlace) {
+  const BrickData brick = load_brick_from("gen:torus?nu=48&nv=24");
+  for (const TriangleTest test : kAllTriangleTests) {
+    const std::string what(triangle_test_name(test));
+    const BvhBrickSerializer serializer(config_of(test));
+    const auto built = build(brick, config_of(test));
+    const auto owned = aligned_copy(save(serializer, *built));
+    for (const bool known_good : {false, true}) {
+      auto loaded = serializer.load({owned->bytes(), owned, known_good}, 0, built->triangle_count());
+      ASSERT_TRUE(loaded.ok()) << what << ": " << loaded.status().to_string();
+      const auto& bvh = dynamic_cast<const BvhBrickAccel&>(**loaded);
+      EXPECT_TRUE(bvh.in_place()) << what;
+      EXPECT_EQ(static_cast<const void*>(bvh.view().nodes.data()),
+                static_cast<const void*>(owned->bytes().data() + 64))
+          << what << ": the nodes are read where they lie";
+      EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes()) << what;
+      expect_same_answers(*built, **loaded, rays_for(brick, 5), what);
+    }
+    // The accel keeps the bytes alive after everyone else lets go, and only
+    // as long as it lives.
+    {
+      auto owner = aligned_copy(save(serializer, *built));
+      auto loaded = serializer.load({owner->bytes(), owner, false}, 0, built->triangle_count());
+      ASSERT_TRUE(loaded.ok());
+      const std::weak_ptr<const AlignedBytes> watch = owner;
+      owner.reset();
+      EXPECT_FALSE(watch.expired()) << what;
+      expect_same_answers(*built, **loaded, rays_for(brick, 7), what);
+      loaded->reset();
+      EXPECT_TRUE(watch.expired()) << what;
+    }
+    // Misaligned bytes with an owner are copied, not read in place.
+    auto shifted = std::make_shared<AlignedBytes>(save(serializer, *built), 1);
+    auto copied = serializer.load({shifted->bytes(), shifted, false}, 0, built->triangle_count());
+    ASSERT_TRUE(copied.ok()) << what;
+    EXPECT_FALSE(dynamic_cast<const BvhBrickAccel&>(**copied).in_place()) << what;
+    expect_same_answers(*built, **copied, rays_for(brick, 6), what);
+  }
 }
 
 TEST(BvhBrickSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {

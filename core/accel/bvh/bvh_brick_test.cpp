@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <random>
 #include <string>
 #include <vector>
@@ -249,16 +250,16 @@ TEST(BvhBrick, AxisParallelRaysWithSignedZeroDirections) {
   }
 }
 
-TEST(BvhBrick, SerialisationRoundTripGivesIdenticalAnswers) {
+TEST(BvhBrick, AnInPlaceViewOfTheTreeGivesIdenticalAnswers) {
   const BrickData brick = load_brick_from("gen:torus?nu=32&nv=16");
   const auto rays = test_rays(brick, 1000, 8);
   for (const TriangleTest test : kAllTests) {
     const auto accel = build(brick, test);
-    const std::string bytes = serialize_bvh(accel->tree());
-    auto tree = deserialize_bvh(bytes);
-    ASSERT_TRUE(tree.ok()) << tree.status().to_string();
-    EXPECT_EQ(tree->nodes.size(), accel->tree().nodes.size());
-    const auto loaded = BvhBrickAccel::from_tree(std::move(tree).value(), test, 0, accel->triangle_count());
+    auto owner = std::make_shared<const BvhTree>(BvhTree::copy_of(accel->view()));
+    const auto loaded = BvhBrickAccel::from_view(owner->view(), owner, test, 0, accel->triangle_count());
+    EXPECT_TRUE(loaded->in_place());
+    EXPECT_FALSE(accel->in_place());
+    EXPECT_EQ(loaded->memory_bytes(), accel->memory_bytes());
     std::vector<Hit> a(rays.size()), b(rays.size());
     accel->intersect(all_ids(rays.size()), rays.data(), a.data());
     loaded->intersect(all_ids(rays.size()), rays.data(), b.data());
@@ -270,27 +271,44 @@ TEST(BvhBrick, SerialisationRoundTripGivesIdenticalAnswers) {
   }
 }
 
-TEST(BvhBrick, CorruptSerialisedTreesAreErrorsNotCrashes) {
+TEST(BvhBrick, ValidateRejectsStructurallyBrokenTrees) {
   const auto accel = build(load_brick_from("gen:sphere?level=2"), TriangleTest::kWatertight);
-  const std::string bytes = serialize_bvh(accel->tree());
-  for (const std::size_t cut : {std::size_t{0}, std::size_t{5}, bytes.size() / 2, bytes.size() - 1}) {
-    EXPECT_FALSE(deserialize_bvh(bytes.substr(0, cut)).ok()) << "cut at " << cut;
-  }
-  std::string huge = bytes;
-  const uint64_t claimed = uint64_t{1} << 31;  // node count far beyond the input
-  std::memcpy(huge.data(), &claimed, sizeof(claimed));
-  EXPECT_FALSE(deserialize_bvh(huge).ok());
-  BvhTree bad = accel->tree();
+  EXPECT_TRUE(accel->view().validate().ok());
+  BvhTree bad = BvhTree::copy_of(accel->view());
   bad.nodes[0].index = 0;  // the root its own child
-  EXPECT_FALSE(deserialize_bvh(serialize_bvh(bad)).ok());
-  bad = accel->tree();
+  EXPECT_FALSE(bad.view().validate().ok());
+  bad = BvhTree::copy_of(accel->view());
   bad.nodes.back().count = 1000000;  // a leaf past the triangles
-  auto loaded = deserialize_bvh(serialize_bvh(bad));
-  ASSERT_FALSE(loaded.ok());
-  EXPECT_NE(loaded.status().message().find("leaf"), std::string::npos) << loaded.status().message();
-  bad = accel->tree();
+  const Status leaf = bad.view().validate();
+  ASSERT_FALSE(leaf.ok());
+  EXPECT_NE(leaf.message().find("leaf"), std::string::npos) << leaf.message();
+  bad = BvhTree::copy_of(accel->view());
   bad.records.pop_back();
-  EXPECT_FALSE(deserialize_bvh(serialize_bvh(bad)).ok());
+  EXPECT_FALSE(bad.view().validate().ok());
+  bad = BvhTree::copy_of(accel->view());
+  bad.nodes.resize(1);  // the root's children out of range
+  EXPECT_FALSE(bad.view().validate().ok());
+  // A chain of `pairs` levels below the root (node 1 + 2p inner but the
+  // last, node 2 + 2p a leaf): its deepest nodes are at depth pairs + 1.
+  const auto chain = [](uint32_t pairs) {
+    BvhTree tree;
+    uint32_t triangle = 0;
+    const auto leaf = [&] { return BvhNode{{}, triangle++, 1}; };
+    tree.nodes.push_back(BvhNode{{}, 1, 0});
+    for (uint32_t p = 0; p < pairs; ++p) {
+      tree.nodes.push_back(p + 1 == pairs ? leaf() : BvhNode{{}, 1 + 2 * p + 2, 0});
+      tree.nodes.push_back(leaf());
+    }
+    tree.triangles.resize(triangle);
+    tree.records.resize(triangle);
+    return tree;
+  };
+  const BvhTree deepest_allowed = chain(kMaxBvhDepth - 1);
+  EXPECT_TRUE(deepest_allowed.view().validate().ok()) << deepest_allowed.view().validate().to_string();
+  const BvhTree deep = chain(kMaxBvhDepth);
+  const Status too_deep = deep.view().validate();
+  ASSERT_FALSE(too_deep.ok());
+  EXPECT_NE(too_deep.message().find("deeper"), std::string::npos) << too_deep.message();
 }
 
 TEST(BvhBrick, ReserveBytesBoundsMemoryAndBuildPeak) {

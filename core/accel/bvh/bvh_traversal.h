@@ -1,4 +1,4 @@
-// Traversal of a BvhTree for one ray: closest hit (with the tie rule of
+// Traversal of a BvhTreeView for one ray: closest hit (with the tie rule of
 // hit_is_better) and any hit (stops at the first), templated on the triangle
 // test (mt_triangle_test.h, watertight_triangle_test.h, double_triangle_test.h)
 // so the hot loop has no virtual or indirect call, and on nothing else: a
@@ -71,7 +71,7 @@ inline bool box_hit(const BoxRay& ray, const Aabb& box, float tmin, float tmax, 
 // Visits the leaves whose boxes the segment [tmin, tmax] may touch, nearest
 // entry first. leaf(first, count) returns true to stop; it may lower tmax.
 template <class LeafFn>
-inline void traverse(const BvhTree& tree, const Ray& ray, float tmin, float& tmax, LeafFn&& leaf) {
+inline void traverse(const BvhTreeView& tree, const Ray& ray, float tmin, float& tmax, LeafFn&& leaf) {
   if (tree.nodes.empty()) return;
   const BvhNode* nodes = tree.nodes.data();
   const BoxRay box_ray(ray);
@@ -123,7 +123,7 @@ inline void traverse(const BvhTree& tree, const Ray& ray, float tmin, float& tma
 // triangle beats it by hit_is_better() (so equal t goes to the smaller user
 // id, whatever the traversal order). Returns whether best changed.
 template <class Test>
-bool bvh_closest_hit(const BvhTree& tree, const Ray& ray, Hit& best) {
+bool bvh_closest_hit(const BvhTreeView& tree, const Ray& ray, Hit& best) {
   float tmax = ray.tfar < best.t ? ray.tfar : best.t;
   if (!(tmax > ray.tnear)) return false;
   const typename Test::Prepared prepared = Test::prepare(ray);
@@ -154,7 +154,7 @@ bool bvh_closest_hit(const BvhTree& tree, const Ray& ray, Hit& best) {
 
 // Any hit of `ray` in (tnear, tfar]; stops at the first.
 template <class Test>
-bool bvh_any_hit(const BvhTree& tree, const Ray& ray) {
+bool bvh_any_hit(const BvhTreeView& tree, const Ray& ray) {
   float tmax = ray.tfar;
   if (!(tmax > ray.tnear)) return false;
   const typename Test::Prepared prepared = Test::prepare(ray);

@@ -37,5 +37,6 @@
   X(seconds_proxy)                  \
   X(seconds_brick_builds)           \
   X(seconds_subtree_loads)          \
-  X(rays_in_brick_set)
+  X(rays_in_brick_set)              \
+  X(subtree_loads_checked)
 // clang-format on
