@@ -183,7 +183,8 @@ class QueryEngine {
   struct UpperWalks;
 
   QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
-              std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report, bool cache_fits_scene);
+              std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report, bool cache_fits_scene,
+              uint64_t bricks_budget_holds);
 
   template <QueryKind kKind>
   Status run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
@@ -196,6 +197,7 @@ class QueryEngine {
   std::unique_ptr<const ProxySet> proxies_;
   ProxyOpenReport proxy_report_;
   bool cache_fits_scene_;
+  uint64_t bricks_budget_holds_;  // the budget over the average brick reservation
   bool embree_bricks_ = false;  // the bricks are EmbreeBrickAccels
   BrickAccelOptions accel_options_;
   std::unique_ptr<const UpperWalks> upper_walks_;
