@@ -257,9 +257,9 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   if (options.access_trace) cache->set_access_trace(options.access_trace);
   if (!options.subtree_dir.empty())
     OUTCORE_RETURN_IF_ERROR(cache->enable_subtree_tier({options.subtree_dir, options.subtree_max_bytes}));
-  auto engine = std::unique_ptr<QueryEngine>(new QueryEngine(
-      std::move(store), std::move(cache), std::move(proxies), std::move(proxy_report), cache_fits_scene,
-      bricks_budget_holds));
+  auto engine = std::unique_ptr<QueryEngine>(new QueryEngine(std::move(store), std::move(cache),
+                                                             std::move(proxies), std::move(proxy_report),
+                                                             cache_fits_scene, bricks_budget_holds));
   engine->accel_options_ = std::move(accel_options);
   engine->embree_bricks_ = options.brick_accel == "embree";
   return engine;
@@ -1023,7 +1023,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
                                   static_cast<int>(tbb::global_control::active_value(
                                       tbb::global_control::max_allowed_parallelism)))));
     const std::size_t loop_bricks = static_cast<std::size_t>(std::max<uint64_t>(
-        build_slots, std::min<uint64_t>(build_slots * kBuildsPerThread, bricks_budget_holds_ / kBudgetBricksPerLoop)));
+        build_slots,
+        std::min<uint64_t>(build_slots * kBuildsPerThread, bricks_budget_holds_ / kBudgetBricksPerLoop)));
     std::vector<uint32_t> building;
     std::vector<BuildTask> build_tasks;
     std::vector<std::size_t> ahead_begin;
