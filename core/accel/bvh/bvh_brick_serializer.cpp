@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <ostream>
+#include <vector>
 
 namespace outcore {
 namespace {
@@ -41,6 +42,13 @@ void write_zeros(Archive& archive, uint64_t bytes) {
 template <class T>
 std::span<const T> array_at(std::span<const char> bytes, uint64_t offset, uint64_t count) {
   return {reinterpret_cast<const T*>(bytes.data() + offset), static_cast<std::size_t>(count)};
+}
+
+// Fills `out` (already sized) from `bytes` at `offset`; an empty vector's
+// data() may be null, which memcpy must not be given even for 0 bytes.
+template <class T>
+void copy_array(std::vector<T>& out, std::span<const char> bytes, uint64_t offset) {
+  if (!out.empty()) std::memcpy(out.data(), bytes.data() + offset, out.size() * sizeof(T));
 }
 
 }  // namespace
@@ -133,9 +141,9 @@ Expected<std::unique_ptr<BrickAccel>> BvhBrickSerializer::load(const SerializedB
     copy.nodes.resize(counts[0]);
     copy.triangles.resize(counts[1]);
     copy.records.resize(counts[2]);
-    std::memcpy(copy.nodes.data(), bytes.data() + layout.nodes, counts[0] * sizeof(BvhNode));
-    std::memcpy(copy.triangles.data(), bytes.data() + layout.triangles, counts[1] * sizeof(Triangle));
-    std::memcpy(copy.records.data(), bytes.data() + layout.records, counts[2] * sizeof(BvhHitRecord));
+    copy_array(copy.nodes, bytes, layout.nodes);
+    copy_array(copy.triangles, bytes, layout.triangles);
+    copy_array(copy.records, bytes, layout.records);
     view = copy.view();
   }
   if (!payload.known_good) {
