@@ -9,7 +9,8 @@ same store and rays:
               builds and writes every brick, later batches load evicted ones)
   restarted   the same budget and directory in a new process, once per
               policy (batch 1 checks every file in full, later batches trust
-              them): a server restarted on a warm directory
+              them): a server restarted on a warm directory; in the first
+              round also at other fractions of the built size (--sweep)
   no tier     the same budget without the tier (first round only: slow)
 A warm batch is any batch after the first; a run's figure is the median of
 its warm batches, a row's the median over rounds of (run / unlimited run of
@@ -73,6 +74,8 @@ def main():
     ap.add_argument("--outcore", type=Path, default=ROOT / "build/client/outcore")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--no-camera", action="store_true")
+    ap.add_argument("--sweep", default="0.0625,0.125,0.5,1",
+                    help="first round only: restarted lru runs at these fractions of the built size")
     args = ap.parse_args()
     work = args.work.resolve()
     work.mkdir(parents=True, exist_ok=True)
@@ -111,6 +114,12 @@ def main():
             row["ratio"] = unl["warm"] / row["warm"]
             add(name, row, "unlimited")
         if r == 0:
+            for fraction in [float(f) for f in args.sweep.split(",") if f]:
+                name = f"restarted-lru-{fraction:g}"
+                row = run_trace(args.outcore, work, "incoherent.npy", name, int(unl["built_mib"] * fraction),
+                                args.repeat, ["--subtree-dir", "tier"], log)
+                row["ratio"] = unl["warm"] / row["warm"]
+                add(name, row, "unlimited")
             row = run_trace(args.outcore, work, "incoherent.npy", "no-tier", quarter, 2, [], log)
             row["ratio"] = unl["warm"] / row["warm"]
             add("no-tier", row, "unlimited")
