@@ -15,8 +15,10 @@ same store and rays:
 A warm batch is any batch after the first; a run's figure is the median of
 its warm batches, a row's the median over rounds of (run / unlimited run of
 the same round). Every hits file is compared bitwise with the unlimited one.
-Peak RSS is the process's (wait4). Unless --no-camera, the first round also runs the camera rays (unlimited and restarted at a quarter of the
-camera's own built size).
+Peak RSS is the process's (wait4). Unless --no-camera, the first round
+also runs the camera rays (unlimited and restarted at a quarter of the
+camera's own built size). Heavy runs are ordered so that the tier's files
+stay in the page cache while tier runs are measured.
 
 Usage: subtree_tier_100m.py WORK_DIR [--rounds 3] [--repeat 5] [--no-camera]
 The store (WORK_DIR/city4883.oc, `gen:city?of=(gen:sphere?level=5)&copies=4883`,
@@ -96,16 +98,25 @@ def main():
             sys.exit(f"{name}: hits differ from {peer}")
         rows.setdefault(name, []).append(row)
 
+    # The heavy runs (unlimited heaps of 8-9 GiB, the slow no-tier run) come
+    # before the tier directory is written or after every tier run: between
+    # them they would push its files out of the page cache, and the tier's
+    # loads would then be measured from the disk.
     for r in range(args.rounds):
         log(f"round {r + 1}/{args.rounds} ({os.getloadavg()[0]:.2f} load)")
+        first = r == 0
         unl = run_trace(args.outcore, work, "incoherent.npy", "unlimited", 65536, args.repeat, [], log)
         add("unlimited", unl, "unlimited")
         quarter = int(unl["built_mib"] / 4)
+        cam = None
+        if first and camera:
+            cam = run_trace(args.outcore, work, "camera.npy", "camera-unlimited", 65536, args.repeat, [], log)
+            add("camera-unlimited", cam, "camera-unlimited")
         tier = work / "tier"
         shutil.rmtree(tier, ignore_errors=True)
         row = run_trace(args.outcore, work, "incoherent.npy", "tier", quarter, args.repeat,
                         ["--subtree-dir", "tier"], log)
-        row["ratio"] = row["warm"] and unl["warm"] / row["warm"]
+        row["ratio"] = unl["warm"] / row["warm"]
         add("tier", row, "unlimited")
         for policy in policies:
             name = f"restarted-{policy}"
@@ -113,24 +124,22 @@ def main():
                             ["--subtree-dir", "tier", "--policy", policy], log)
             row["ratio"] = unl["warm"] / row["warm"]
             add(name, row, "unlimited")
-        if r == 0:
+        if first:
             for fraction in [float(f) for f in args.sweep.split(",") if f]:
                 name = f"restarted-lru-{fraction:g}"
                 row = run_trace(args.outcore, work, "incoherent.npy", name, int(unl["built_mib"] * fraction),
                                 args.repeat, ["--subtree-dir", "tier"], log)
                 row["ratio"] = unl["warm"] / row["warm"]
                 add(name, row, "unlimited")
-            row = run_trace(args.outcore, work, "incoherent.npy", "no-tier", quarter, 2, [], log)
-            row["ratio"] = unl["warm"] / row["warm"]
-            add("no-tier", row, "unlimited")
-            if camera:
-                cam = run_trace(args.outcore, work, "camera.npy", "camera-unlimited", 65536, args.repeat, [], log)
-                add("camera-unlimited", cam, "camera-unlimited")
-                cam_quarter = int(cam["built_mib"] / 4)
-                row = run_trace(args.outcore, work, "camera.npy", "camera-restarted-lru", cam_quarter,
+            if cam is not None:
+                row = run_trace(args.outcore, work, "camera.npy", "camera-restarted-lru", int(cam["built_mib"] / 4),
                                 args.repeat, ["--subtree-dir", "tier"], log)
                 row["ratio"] = cam["warm"] / row["warm"]
                 add("camera-restarted-lru", row, "camera-unlimited")
+            shutil.rmtree(tier, ignore_errors=True)
+            row = run_trace(args.outcore, work, "incoherent.npy", "no-tier", quarter, 2, [], log)
+            row["ratio"] = unl["warm"] / row["warm"]
+            add("no-tier", row, "unlimited")
         shutil.rmtree(tier, ignore_errors=True)
 
     log("\nrun                    warm s (median)  vs unlimited (median; range)  loads/warm batch  peak RSS MiB")
