@@ -80,20 +80,16 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
 }
 
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
-                                    const BrickSerializer& serializer) {
+                                    const BrickSerializer& serializer,
+                                    const std::optional<FileIdentity>& trusted) {
   Expected<MappedFile> mapped = MappedFile::open(path);
   if (!mapped.ok()) {
     if (mapped.status().code() == StatusCode::kNotFound) return SubtreeReadResult{};
     return rejected(SubtreeRejection::kCorrupt, path, mapped.status().message());
   }
-  return read_subtree_file(std::make_shared<const MappedFile>(std::move(mapped).value()), path, key,
-                           serializer,
-                           /*known_good=*/false);
-}
-
-SubtreeReadResult read_subtree_file(std::shared_ptr<const MappedFile> file, const std::string& path,
-                                    const SubtreeKey& key, const BrickSerializer& serializer,
-                                    bool known_good) {
+  const FileIdentity identity = mapped->identity();
+  const bool known_good = trusted.has_value() && *trusted == identity;
+  auto file = std::make_shared<const MappedFile>(std::move(mapped).value());
   const std::span<const char> bytes = file->bytes();
   if (bytes.size() < kPreambleBytes + kTrailerBytes) {
     return rejected(SubtreeRejection::kCorrupt, path,
@@ -137,6 +133,8 @@ SubtreeReadResult read_subtree_file(std::shared_ptr<const MappedFile> file, cons
   }
   SubtreeReadResult result;
   result.file_bytes = bytes.size();
+  result.identity = identity;
+  result.checked = !known_good;
   try {
     const SerializedBrick payload{bytes.subspan(payload_offset, checked - payload_offset), std::move(file),
                                   known_good};

@@ -34,6 +34,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "core/accel/brick_serializer.h"
@@ -75,6 +76,8 @@ struct SubtreeReadResult {
   SubtreeRejection rejection = SubtreeRejection::kAbsent;
   std::string message;  // why, naming the file, when rejected (not when absent)
   uint64_t file_bytes = 0;
+  FileIdentity identity;  // of the file read, when there was one
+  bool checked = false;   // the checksum and structural checks ran (it was not trusted)
 };
 
 // Writes `accel` under `key` to a new file at `path` (which must not exist);
@@ -82,13 +85,12 @@ struct SubtreeReadResult {
 Status write_subtree_file(const std::string& path, const SubtreeKey& key, const BrickSerializer& serializer,
                           const BrickAccel& accel, uint64_t* file_bytes);
 
-// Reads `path` if it holds `key`; never throws, never trusts the file.
+// Reads `path` if it holds `key`; never throws. The loaded accel keeps the
+// file mapped and reads it in place. `trusted`: the identity of a file the
+// caller wrote or checked in full before; when the file at `path` still has
+// it, it is known good (see above) and only its header is checked.
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
-                                    const BrickSerializer& serializer);
-// The same over a file the caller mapped (`path` names it in messages); the
-// loaded accel may keep `file` and read it in place. known_good: see above.
-SubtreeReadResult read_subtree_file(std::shared_ptr<const MappedFile> file, const std::string& path,
-                                    const SubtreeKey& key, const BrickSerializer& serializer,
-                                    bool known_good);
+                                    const BrickSerializer& serializer,
+                                    const std::optional<FileIdentity>& trusted = std::nullopt);
 
 }  // namespace outcore

@@ -91,36 +91,26 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
   const std::string name = file_name(key);
   const std::string path = path_of(key);
   const auto start = Clock::now();
-  SubtreeReadResult read;
-  bool known_good = false;
-  FileIdentity identity;
-  Expected<MappedFile> mapped = MappedFile::open(path);
-  if (mapped.ok()) {
-    identity = mapped->identity();
-    {
-      std::lock_guard lock(mutex_);
-      const auto it = files_.find(name);
-      known_good = it != files_.end() && it->second.known_good == identity;
-    }
-    read = read_subtree_file(std::make_shared<const MappedFile>(std::move(mapped).value()), path, key,
-                             serializer_, known_good);
-  } else if (mapped.status().code() != StatusCode::kNotFound) {
-    read.rejection = SubtreeRejection::kCorrupt;
-    read.message = mapped.status().message();
+  std::optional<FileIdentity> trusted;
+  {
+    std::lock_guard lock(mutex_);
+    const auto it = files_.find(name);
+    if (it != files_.end()) trusted = it->second.known_good;
   }
+  SubtreeReadResult read = read_subtree_file(path, key, serializer_, trusted);
   const double seconds = seconds_since(start);
 
   std::lock_guard lock(mutex_);
   switch (read.rejection) {
     case SubtreeRejection::kNone: {
       ++counters_.loads;
-      if (!known_good) ++counters_.loads_checked;
+      if (read.checked) ++counters_.loads_checked;
       counters_.bytes_read += read.file_bytes;
       counters_.load_seconds += seconds;
       const auto it = files_.find(name);
       if (it != files_.end()) {
         it->second.last_use = ++use_clock_;
-        it->second.known_good = identity;
+        it->second.known_good = read.identity;
       }
       return std::move(read.accel);
     }
@@ -167,7 +157,9 @@ std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const Bric
     return nullptr;
   }
   // Ours, under a name no one else uses: what we wrote, so known good.
-  Expected<FileIdentity> identity = file_identity(temp);
+  const Expected<FileIdentity> identity = file_identity(temp);
+  const std::optional<FileIdentity> ours =
+      identity.ok() ? std::optional<FileIdentity>(*identity) : std::nullopt;
   std::unique_lock lock(mutex_);
   if (options_.max_bytes > 0 && bytes > options_.max_bytes) {
     fs::remove(temp, error);
@@ -186,26 +178,17 @@ std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const Bric
     return nullptr;
   }
   forget_locked(name);  // a file another process wrote meanwhile was replaced
-  files_[name] = {bytes, ++use_clock_, identity.ok() ? std::optional<FileIdentity>(*identity) : std::nullopt};
+  files_[name] = {bytes, ++use_clock_, ours};
   ++counters_.files;
   counters_.bytes += bytes;
   ++counters_.writes;
   counters_.bytes_written += bytes;
   counters_.write_seconds += seconds_since(start);
   lock.unlock();
-  return map_written(key, identity.ok() ? std::optional<FileIdentity>(*identity) : std::nullopt);
-}
-
-std::unique_ptr<BrickAccel> SubtreeTier::map_written(const SubtreeKey& key,
-                                                     const std::optional<FileIdentity>& written) {
-  const std::string path = path_of(key);
-  Expected<MappedFile> mapped = MappedFile::open(path);
-  if (!mapped.ok()) return nullptr;  // deleted meanwhile (a bound, another process): keep the built one
-  // Another process may have replaced it since the rename: then check it.
-  const bool known_good = written.has_value() && mapped->identity() == *written;
-  SubtreeReadResult read = read_subtree_file(std::make_shared<const MappedFile>(std::move(mapped).value()),
-                                             path, key, serializer_, known_good);
-  return std::move(read.accel);
+  // The written file, mapped in place. Deleted meanwhile (a bound, another
+  // process): nullptr, the caller keeps the built one; replaced by another
+  // process since the rename (another identity): checked in full.
+  return read_subtree_file(path_of(key), key, serializer_, ours).accel;
 }
 
 void SubtreeTier::evict_locked(uint64_t incoming) {

@@ -117,8 +117,6 @@ class SubtreeTier {
   };
 
   SubtreeTier(const SubtreeTierOptions& options, const BrickSerializer& serializer);
-  // The file store() just wrote, loaded in place; `written`: its identity then.
-  std::unique_ptr<BrickAccel> map_written(const SubtreeKey& key, const std::optional<FileIdentity>& written);
   std::string file_name(const SubtreeKey& key) const;
   // Under the lock: deletes least recently used files until `incoming` more
   // bytes fit in the bound.
