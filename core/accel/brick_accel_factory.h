@@ -13,6 +13,7 @@
 
 #include "core/accel/brick_accel.h"
 #include "core/accel/brick_serializer.h"
+#include "core/geometry/hit_rounding.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
 
@@ -31,6 +32,11 @@ class BrickBuilder {
   // How to save and reload this builder's accels (the subtree tier), or
   // nullptr when the structure cannot be serialised (embree, reference).
   virtual const BrickSerializer* serializer() const { return nullptr; }
+  // How far (relative to |ray origin| + |brick coordinates|) the exact ray
+  // may pass from a triangle this structure's float test accepts: the brick
+  // proxies' rounding bound (core/proxy/brick_proxy.h). Moeller-Trumbore's
+  // unless the structure's test is watertight.
+  virtual double hit_rounding_scale() const { return kMollerTrumboreHitRounding; }
 };
 
 using BrickAccelOptions = std::map<std::string, std::string>;

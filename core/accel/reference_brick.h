@@ -58,6 +58,7 @@ class ReferenceBrickBuilder final : public BrickBuilder {
     return ReferenceBrickAccel::reserve_bytes(triangle_count);
   }
   const std::string& name() const override;
+  double hit_rounding_scale() const override { return kWatertightHitRounding; }
 };
 
 }  // namespace outcore

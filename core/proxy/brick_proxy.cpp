@@ -13,9 +13,7 @@ namespace {
 // See brick_proxy.h: the segment is widened by this much of its ends (the t of
 // a grazing hit is less accurate than its position) ...
 constexpr double kSegmentWiden = 0x1p-8;
-// ... and by the rounding bound E = kRoundingScale * (|origin| + |brick|),
-// which covers |o|, |t d| and |v - o| of any point near the brick.
-constexpr double kRoundingScale = 0x1p-15;
+// ... and by the rounding bound E = proxy_rounding_bound(scale, |origin|, |brick|).
 
 double max_abs(const Vec3d& v) {
   return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)});
@@ -34,15 +32,19 @@ bool block_touched(const ProxyRayIS& ray, double t0, double t1, ProxyLeafCache& 
 
 }  // namespace
 
-void BrickProxy::Impl::finish() {
-  inverse_voxel_size_WS = 1.0 / frame.voxel_size_WS;
+double ProxyFrame::domain_magnitude_WS() const {
   double magnitude = 0;
   for (int axis = 0; axis < 3; ++axis) {
-    const double lo = frame.origin_WS[axis];
-    const double hi = lo + frame.dims_IS[axis] * frame.voxel_size_WS;
+    const double lo = origin_WS[axis];
+    const double hi = lo + dims_IS[axis] * voxel_size_WS;
     magnitude = std::max({magnitude, std::fabs(lo), std::fabs(hi)});
   }
-  domain_magnitude_WS = magnitude;
+  return magnitude;
+}
+
+void BrickProxy::Impl::finish() {
+  inverse_voxel_size_WS = 1.0 / frame.voxel_size_WS;
+  domain_magnitude_WS = frame.domain_magnitude_WS();
   if (root) active_voxels = root->onVoxelCount();
 }
 
@@ -74,14 +76,14 @@ bool BrickProxy::is_occupied(int32_t i, int32_t j, int32_t k) const {
   return leaves.is_on(openvdb::Coord(i, j, k));
 }
 
-bool BrickProxy::may_hit(const Ray& ray, float tmin_f, float tmax_f) const {
+bool BrickProxy::may_hit(const Ray& ray, float tmin_f, float tmax_f, double rounding_scale) const {
   if (!impl_ || !impl_->root) return true;  // no proxy: cannot decide
   const Impl& p = *impl_;
   const ProxyFrame& f = p.frame;
   const Vec3d o(ray.origin), d(ray.direction);
 
   // The rounding bound; beyond half the builder's margin the grid cannot decide.
-  const double rounding = kRoundingScale * (max_abs(o) + p.domain_magnitude_WS);
+  const double rounding = proxy_rounding_bound(rounding_scale, max_abs(o), p.domain_magnitude_WS);
   if (!(2 * rounding <= f.margin_WS)) return true;
 
   // The segment, widened, then clipped to the grid's domain (which extends a

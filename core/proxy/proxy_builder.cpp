@@ -57,8 +57,16 @@ bool triangle_overlaps_box(const Vec3d& a, const Vec3d& b, const Vec3d& c, const
   return true;
 }
 
-ProxyFrame proxy_frame_for(const Aabb& bounds_WS, const ProxyBuildConfig& config) {
-  const Vec3d lo(bounds_WS.lo), hi(bounds_WS.hi);
+double proxy_origin_reach(const Aabb& scene_bounds_WS) {
+  const Vec3d lo(scene_bounds_WS.lo), hi(scene_bounds_WS.hi);
+  const Vec3d extent = hi - lo;
+  const double longest = std::max({extent.x, extent.y, extent.z, 0.0});
+  return std::max(max_abs(lo), max_abs(hi)) + longest;
+}
+
+ProxyFrame proxy_frame_for(const Aabb& brick_bounds_WS, const Aabb& scene_bounds_WS,
+                           const ProxyBuildConfig& config) {
+  const Vec3d lo(brick_bounds_WS.lo), hi(brick_bounds_WS.hi);
   const Vec3d extent = hi - lo;
   const double longest = std::max({extent.x, extent.y, extent.z});
   // A brick of coinciding points still gets a positive voxel size.
@@ -67,7 +75,6 @@ ProxyFrame proxy_frame_for(const Aabb& bounds_WS, const ProxyBuildConfig& config
   const double h = std::max(longest / config.resolution, floor_size);
   ProxyFrame frame;
   frame.voxel_size_WS = h;
-  frame.margin_WS = kProxyMarginVoxels * h;
   for (int axis = 0; axis < 3; ++axis) {
     frame.origin_WS[axis] = lo[axis] - h;
     // The box plus one voxel beyond each side, whatever the rounding.
@@ -75,13 +82,16 @@ ProxyFrame proxy_frame_for(const Aabb& bounds_WS, const ProxyBuildConfig& config
     while (frame.origin_WS[axis] + n * h < hi[axis] + h) ++n;
     frame.dims_IS[axis] = n;
   }
+  const double wanted = 2 * proxy_rounding_bound(kWatertightHitRounding, proxy_origin_reach(scene_bounds_WS),
+                                                 frame.domain_magnitude_WS());
+  frame.margin_WS = std::clamp(wanted, kProxyMarginVoxels * h, kMaxProxyMarginVoxels * h);
   return frame;
 }
 
-BrickProxy build_brick_proxy(const Aabb& bounds_WS, std::span<const Triangle> triangles,
-                             const ProxyBuildConfig& config) {
+BrickProxy build_brick_proxy(const Aabb& brick_bounds_WS, const Aabb& scene_bounds_WS,
+                             std::span<const Triangle> triangles, const ProxyBuildConfig& config) {
   auto impl = std::make_unique<BrickProxy::Impl>();
-  impl->frame = proxy_frame_for(bounds_WS, config);
+  impl->frame = proxy_frame_for(brick_bounds_WS, scene_bounds_WS, config);
   const ProxyFrame& f = impl->frame;
   impl->root = std::make_unique<ProxyRoot>(false);
   ProxyRoot& root = *impl->root;

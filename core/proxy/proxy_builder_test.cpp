@@ -96,7 +96,7 @@ TEST(ProxyBuilder, EveryPointOfEveryTriangleAndItsMarginIsInAnOccupiedVoxel) {
       ProxyBuildConfig config;
       config.resolution = res;
       const Aabb box = bounds_of(tris);
-      const BrickProxy proxy = build_brick_proxy(box, tris, config);
+      const BrickProxy proxy = build_brick_proxy(box, box, tris, config);
       const ProxyFrame& f = proxy.frame();
       ASSERT_GT(f.voxel_size_WS, 0);
       const double longest =
@@ -128,7 +128,8 @@ TEST(ProxyBuilder, EveryPointOfEveryTriangleAndItsMarginIsInAnOccupiedVoxel) {
 TEST(ProxyBuilder, FrameSpansTheBoxPlusAVoxelAndHandlesFlatAndPointBricks) {
   ProxyBuildConfig config;
   config.resolution = 32;
-  const ProxyFrame cube = proxy_frame_for(Aabb{{0, 0, 0}, {2, 1, 0.5f}}, config);
+  const Aabb cube_box{{0, 0, 0}, {2, 1, 0.5f}};
+  const ProxyFrame cube = proxy_frame_for(cube_box, cube_box, config);
   EXPECT_DOUBLE_EQ(cube.voxel_size_WS, 2.0 / 32);
   EXPECT_EQ(cube.dims_IS[0], 34);
   EXPECT_EQ(cube.dims_IS[1], 18);
@@ -137,28 +138,28 @@ TEST(ProxyBuilder, FrameSpansTheBoxPlusAVoxelAndHandlesFlatAndPointBricks) {
 
   // A flat brick (a ground plane) and a brick of one point.
   const std::vector<Triangle> flat = {{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}};
-  const BrickProxy plane = build_brick_proxy(bounds_of(flat), flat, config);
+  const BrickProxy plane = build_brick_proxy(bounds_of(flat), bounds_of(flat), flat, config);
   EXPECT_EQ(plane.frame().dims_IS[2], 2);
   Ray above;
   above.origin = {-0.5f, 0.2f, 0.2f};
   above.direction = {1, 0, 0};
-  EXPECT_FALSE(plane.may_hit(above, 0, 10));  // beyond the grid's domain
+  EXPECT_FALSE(plane.may_hit(above, 0, 10, kMollerTrumboreHitRounding));  // beyond the grid's domain
   Ray down;
   down.origin = {0.2f, 0.2f, 1};
   down.direction = {0, 0, -1};
-  EXPECT_TRUE(plane.may_hit(down, 0, 10));
+  EXPECT_TRUE(plane.may_hit(down, 0, 10, kMollerTrumboreHitRounding));
   down.origin = {0.9f, 0.9f, 1};  // over the box, beside the triangle
-  EXPECT_FALSE(plane.may_hit(down, 0, 10));
+  EXPECT_FALSE(plane.may_hit(down, 0, 10, kMollerTrumboreHitRounding));
 
   const std::vector<Triangle> point = {{{5, 5, 5}, {5, 5, 5}, {5, 5, 5}}};
-  const BrickProxy dot = build_brick_proxy(bounds_of(point), point, config);
+  const BrickProxy dot = build_brick_proxy(bounds_of(point), bounds_of(point), point, config);
   EXPECT_GT(dot.frame().voxel_size_WS, 0);
   Ray through;
   through.origin = {0, 0, 0};
   through.direction = {1, 1, 1};
   // Its voxels are far below float rounding at its coordinates: never skipped.
-  EXPECT_TRUE(dot.may_hit(through, 0, 10));
-  EXPECT_TRUE(dot.may_hit(through, 0, 4.9f));
+  EXPECT_TRUE(dot.may_hit(through, 0, 10, kMollerTrumboreHitRounding));
+  EXPECT_TRUE(dot.may_hit(through, 0, 4.9f, kMollerTrumboreHitRounding));
 }
 
 TEST(ProxyBuilder, RaysThroughTheEmptyPartOfABrickAreSkipped) {
@@ -168,7 +169,7 @@ TEST(ProxyBuilder, RaysThroughTheEmptyPartOfABrickAreSkipped) {
     tris.push_back({{c, c, c}, {c + 0.1f, c, c}, {c, c + 0.1f, c + 0.1f}});
     tris.push_back({{c + 0.1f, c + 0.1f, c + 0.1f}, {c + 0.1f, c, c}, {c, c + 0.1f, c + 0.1f}});
   }
-  const BrickProxy proxy = build_brick_proxy(bounds_of(tris), tris, ProxyBuildConfig{});
+  const BrickProxy proxy = build_brick_proxy(bounds_of(tris), bounds_of(tris), tris, ProxyBuildConfig{});
   auto ray = [](Vec3f o, Vec3f d) {
     Ray r;
     r.origin = o;
@@ -177,18 +178,19 @@ TEST(ProxyBuilder, RaysThroughTheEmptyPartOfABrickAreSkipped) {
   };
   const float inf = std::numeric_limits<float>::infinity();
   // Across the middle, along the other diagonal, and along the axes.
-  EXPECT_FALSE(proxy.may_hit(ray({-1, 2, 0.5f}, {1, -1, 0}), 0, inf));
-  EXPECT_FALSE(proxy.may_hit(ray({0.5f, 0.5f, -1}, {0, 0, 1}), 0, inf));
-  EXPECT_FALSE(proxy.may_hit(ray({-1, 0.5f, 0.5f}, {1, 0, 0}), 0, inf));
-  EXPECT_FALSE(proxy.may_hit(ray({0.05f, 0.95f, -3}, {0, 0, 1}), 0, inf));
+  EXPECT_FALSE(proxy.may_hit(ray({-1, 2, 0.5f}, {1, -1, 0}), 0, inf, kMollerTrumboreHitRounding));
+  EXPECT_FALSE(proxy.may_hit(ray({0.5f, 0.5f, -1}, {0, 0, 1}), 0, inf, kMollerTrumboreHitRounding));
+  EXPECT_FALSE(proxy.may_hit(ray({-1, 0.5f, 0.5f}, {1, 0, 0}), 0, inf, kMollerTrumboreHitRounding));
+  EXPECT_FALSE(proxy.may_hit(ray({0.05f, 0.95f, -3}, {0, 0, 1}), 0, inf, kMollerTrumboreHitRounding));
   // Through a cluster; then the same ray ending before it or starting after it.
-  EXPECT_TRUE(proxy.may_hit(ray({-1, -1, -1}, {1, 1, 1}), 0, inf));
-  EXPECT_TRUE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 1}), 0, inf));
-  EXPECT_FALSE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 1}), 0, 2.5f));
-  EXPECT_FALSE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 1}), 3.5f, inf));
-  EXPECT_TRUE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 2}), 0, 1.6f));  // t in direction lengths
+  EXPECT_TRUE(proxy.may_hit(ray({-1, -1, -1}, {1, 1, 1}), 0, inf, kMollerTrumboreHitRounding));
+  EXPECT_TRUE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 1}), 0, inf, kMollerTrumboreHitRounding));
+  EXPECT_FALSE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 1}), 0, 2.5f, kMollerTrumboreHitRounding));
+  EXPECT_FALSE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 1}), 3.5f, inf, kMollerTrumboreHitRounding));
+  EXPECT_TRUE(proxy.may_hit(ray({0.05f, 0.05f, -3}, {0, 0, 2}), 0, 1.6f,
+                            kMollerTrumboreHitRounding));  // t in direction lengths
   // Misses the domain altogether.
-  EXPECT_FALSE(proxy.may_hit(ray({5, 5, 5}, {1, 0, 0}), 0, inf));
+  EXPECT_FALSE(proxy.may_hit(ray({5, 5, 5}, {1, 0, 0}), 0, inf, kMollerTrumboreHitRounding));
 }
 
 TEST(ProxyBuilder, MayHitIsTrueForEveryRayTheFloat64ReferenceHits) {
@@ -196,7 +198,7 @@ TEST(ProxyBuilder, MayHitIsTrueForEveryRayTheFloat64ReferenceHits) {
   const Aabb space{{10, -2, 3}, {12, 0, 5}};
   const auto tris = random_triangles(rng, space, 60);
   const Aabb box = bounds_of(tris);
-  const BrickProxy proxy = build_brick_proxy(box, tris, ProxyBuildConfig{});
+  const BrickProxy proxy = build_brick_proxy(box, box, tris, ProxyBuildConfig{});
   const Aabb around{box.lo - box.extent(), box.hi + box.extent()};
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
   int hits = 0, skipped = 0;
@@ -210,7 +212,7 @@ TEST(ProxyBuilder, MayHitIsTrueForEveryRayTheFloat64ReferenceHits) {
     if (i % 7 == 0) r.tnear = 0.5f * u(rng);
     bool hit = false;
     for (const Triangle& t : tris) hit = hit || reference_triangle_hit(t, r).has_value();
-    const bool may = proxy.may_hit(r, r.tnear, r.tfar);
+    const bool may = proxy.may_hit(r, r.tnear, r.tfar, kMollerTrumboreHitRounding);
     if (hit) {
       ++hits;
       ASSERT_TRUE(may) << "ray " << i;
@@ -224,19 +226,19 @@ TEST(ProxyBuilder, MayHitIsTrueForEveryRayTheFloat64ReferenceHits) {
 TEST(ProxyBuilder, TooSmallABrickForItsDistanceFromTheOriginIsNeverSkipped) {
   // A brick of 1 unit at 1e7: float rounding there exceeds a voxel.
   const std::vector<Triangle> tris = {{{1e7f, 1e7f, 1e7f}, {1e7f + 1, 1e7f, 1e7f}, {1e7f, 1e7f + 1, 1e7f}}};
-  const BrickProxy proxy = build_brick_proxy(bounds_of(tris), tris, ProxyBuildConfig{});
+  const BrickProxy proxy = build_brick_proxy(bounds_of(tris), bounds_of(tris), tris, ProxyBuildConfig{});
   Ray r;
   r.origin = {1e7f + 0.9f, 1e7f + 0.9f, 1e7f - 5};
   r.direction = {0, 0, 1};
-  EXPECT_TRUE(proxy.may_hit(r, 0, std::numeric_limits<float>::infinity()));
+  EXPECT_TRUE(proxy.may_hit(r, 0, std::numeric_limits<float>::infinity(), kMollerTrumboreHitRounding));
   // Near the origin the same shape is skipped beside the triangle.
   const std::vector<Triangle> near = {{{1, 1, 1}, {2, 1, 1}, {1, 2, 1}}};
-  const BrickProxy small = build_brick_proxy(bounds_of(near), near, ProxyBuildConfig{});
+  const BrickProxy small = build_brick_proxy(bounds_of(near), bounds_of(near), near, ProxyBuildConfig{});
   r.origin = {1.9f, 1.9f, -4};
-  EXPECT_FALSE(small.may_hit(r, 0, std::numeric_limits<float>::infinity()));
+  EXPECT_FALSE(small.may_hit(r, 0, std::numeric_limits<float>::infinity(), kMollerTrumboreHitRounding));
   // ... unless the ray comes from very far away.
   r.origin = {1.9f, 1.9f, -1e6f};
-  EXPECT_TRUE(small.may_hit(r, 0, std::numeric_limits<float>::infinity()));
+  EXPECT_TRUE(small.may_hit(r, 0, std::numeric_limits<float>::infinity(), kMollerTrumboreHitRounding));
 }
 
 TEST(ProxyBuilder, ResolutionIsRangeChecked) {
@@ -251,4 +253,58 @@ TEST(ProxyBuilder, ResolutionIsRangeChecked) {
 }
 
 }  // namespace
+TEST(ProxyBuilder, MarginsGrowWithTheScenesReachSoFarBricksStillSkip) {
+  // A 3-unit brick 3900 units from the origin in an 8000-unit flat scene: a
+  // quarter voxel (0.023) is below twice the watertight rounding bound of a
+  // ray from 8000 units away, so without the grown margin every such ray
+  // would be answered "may hit".
+  const Aabb scene{{-4000, -2, -4000}, {4000, 2, 4000}};
+  std::vector<Triangle> tris;
+  for (const float c : {0.0f, 2.7f}) {  // clusters in opposite corners
+    const Vec3f o(3900 + c, -1.5f + c, 3900 + c);
+    tris.push_back({o, o + Vec3f(0.3f, 0, 0), o + Vec3f(0, 0.3f, 0.3f)});
+  }
+  const Aabb box = bounds_of(tris);
+  const BrickProxy proxy = build_brick_proxy(box, scene, tris, ProxyBuildConfig{});
+  const ProxyFrame& f = proxy.frame();
+  // A quarter voxel would not do for a ray from 4000 units away ...
+  EXPECT_GT(2 * proxy_rounding_bound(kWatertightHitRounding, 4000, f.domain_magnitude_WS()),
+            0.25 * f.voxel_size_WS);
+  EXPECT_GT(f.margin_WS, 0.25 * f.voxel_size_WS);
+  EXPECT_LE(f.margin_WS, kMaxProxyMarginVoxels * f.voxel_size_WS);
+  const double reach = proxy_origin_reach(scene);
+  EXPECT_DOUBLE_EQ(reach, 12000);
+  EXPECT_GE(f.margin_WS, 2 * proxy_rounding_bound(kWatertightHitRounding, reach, f.domain_magnitude_WS()));
+
+  // ... so from 8000 units away, across the empty middle of the brick, only
+  // the grown margin lets the proxy skip.
+  Ray across;
+  across.origin = {-4000, 0, -4000};
+  across.direction = Vec3f(3901.5f, 0, 3901.5f) - across.origin;
+  EXPECT_FALSE(proxy.may_hit(across, 0, std::numeric_limits<float>::infinity(), kWatertightHitRounding));
+
+  // Never skipped when the reference hits, from anywhere in the reach.
+  std::mt19937_64 rng(11);
+  const Aabb around{{-12000, -4000, -12000}, {12000, 4000, 12000}};
+  int hits = 0, skipped = 0;
+  for (int i = 0; i < 20000; ++i) {
+    Ray r;
+    r.origin = random_point(rng, around);
+    const Triangle& aim = tris[i % tris.size()];
+    const Vec3f target =
+        i % 2 ? random_point(rng, box) : aim.v0 + (aim.v1 - aim.v0) * 0.3f + (aim.v2 - aim.v0) * 0.3f;
+    r.direction = target - r.origin;
+    bool hit = false;
+    for (const Triangle& t : tris) hit = hit || reference_triangle_hit(t, r).has_value();
+    const bool may = proxy.may_hit(r, r.tnear, r.tfar, kWatertightHitRounding);
+    if (hit) {
+      ++hits;
+      ASSERT_TRUE(may) << "ray " << i;
+    }
+    skipped += !may;
+  }
+  EXPECT_GT(hits, 5000);
+  EXPECT_GT(skipped, 5000);
+}
+
 }  // namespace outcore

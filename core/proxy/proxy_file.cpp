@@ -231,7 +231,7 @@ Expected<std::unique_ptr<const ProxySet>> read_proxy_file(const std::string& pat
     FrameRecord frame{};
     uint32_t counts[2] = {0, 0};
     if (!take(&frame, sizeof frame) || !take(counts, sizeof counts)) return bad("truncated");
-    const ProxyFrame want = proxy_frame_for(manifest.bricks[b].bounds, config);
+    const ProxyFrame want = proxy_frame_for(manifest.bricks[b].bounds, manifest.bounds, config);
     bool frame_ok =
         same_bits(frame.voxel_size, want.voxel_size_WS) && same_bits(frame.margin, want.margin_WS);
     for (int a = 0; a < 3; ++a) {

@@ -27,7 +27,8 @@
 namespace outcore {
 
 inline constexpr char kProxyFileName[] = "proxies.bin";
-inline constexpr uint32_t kProxyFormatVersion = 1;
+// 2: margins grown with the scene's reach (proxy_builder.h); 1 files are rebuilt.
+inline constexpr uint32_t kProxyFormatVersion = 2;
 inline constexpr char kProxyMagic[8] = {'O', 'C', 'P', 'R', 'O', 'X', 'Y', '\x1a'};
 
 struct ProxyFileHeader {

@@ -34,7 +34,8 @@ Expected<std::unique_ptr<const ProxySet>> ProxySet::build(const SceneStore& stor
     BrickData data;
     errors[b] = store.load_brick(b, data);
     if (errors[b].ok())
-      proxies[b] = build_brick_proxy(store.manifest().bricks[b].bounds, data.triangles, config);
+      proxies[b] = build_brick_proxy(store.manifest().bricks[b].bounds, store.manifest().bounds,
+                                     data.triangles, config);
   });
   // A brick that cannot be read gets no proxy (it is never skipped), so the
   // query that needs it reports the error, as without proxies.

@@ -236,7 +236,7 @@ TEST_F(ProxySetTest, AnUnreadableBrickGetsNoProxyAndNothingIsWritten) {
   Ray anything;
   anything.origin = {100, 100, 100};
   anything.direction = {1, 0, 0};
-  EXPECT_TRUE((*set)->brick(bad).may_hit(anything, 0, 1));  // never skipped
+  EXPECT_TRUE((*set)->brick(bad).may_hit(anything, 0, 1, kMollerTrumboreHitRounding));  // never skipped
 }
 
 }  // namespace

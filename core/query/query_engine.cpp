@@ -284,6 +284,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const uint64_t ticks_start = ticks();
   uint64_t proxy_ticks = 0;
   const ProxySet* const proxies = proxies_.get();
+  const double hit_rounding = cache_->builder().hit_rounding_scale();
   const uint32_t brick_count = store_->brick_count();
   // This batch's view of which bricks are resident. A proxy saves a load and
   // a build, never tracing time (testing one costs about as much as tracing a
@@ -506,7 +507,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       if (proxies == nullptr || (!known_resident.empty() && known_resident[key.brick])) return key.brick;
       ++counters.proxy_tests;
       const uint64_t t0 = ticks();
-      const bool may_hit = proxies->brick(key.brick).may_hit(rays[i], rays[i].tnear, limit);
+      const bool may_hit = proxies->brick(key.brick).may_hit(rays[i], rays[i].tnear, limit, hit_rounding);
       counters.proxy_ticks += ticks() - t0;
       if (may_hit) return key.brick;
       ++counters.skipped;
@@ -824,7 +825,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
           if (proxies != nullptr) {
             ++counters.proxy_tests;
             const uint64_t t0 = ticks();
-            const bool may_hit = proxies->brick(brick).may_hit(rays[ray], rays[ray].tnear, horizon(ray));
+            const bool may_hit =
+                proxies->brick(brick).may_hit(rays[ray], rays[ray].tnear, horizon(ray), hit_rounding);
             counters.proxy_ticks += ticks() - t0;
             if (!may_hit) {
               outcomes[j] = kAheadSkip;

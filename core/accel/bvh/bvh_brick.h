@@ -118,6 +118,9 @@ class BvhBrickBuilder final : public BrickBuilder {
   }
   const std::string& name() const override;
   const BrickSerializer* serializer() const override;
+  double hit_rounding_scale() const override {
+    return config_.triangle_test == TriangleTest::kMt ? kMollerTrumboreHitRounding : kWatertightHitRounding;
+  }
   const BvhBrickConfig& config() const { return config_; }
 
  private:
