@@ -135,9 +135,11 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
   result.file_bytes = bytes.size();
   result.identity = identity;
   result.checked = !known_good;
+  result.payload = bytes.subspan(payload_offset, checked - payload_offset);
+  result.file = file;
   try {
-    const SerializedBrick payload{bytes.subspan(payload_offset, checked - payload_offset), std::move(file),
-                                  known_good};
+    const SerializedBrick payload{result.payload,
+                                  std::make_shared<const SubtreeMappingLease>(std::move(file)), known_good};
     Expected<std::unique_ptr<BrickAccel>> loaded = serializer.load(payload, key.brick_id, key.triangle_count);
     if (!loaded.ok()) return rejected(SubtreeRejection::kCorrupt, path, loaded.status().message());
     result.accel = std::move(loaded).value();
@@ -146,6 +148,19 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
   }
   result.rejection = SubtreeRejection::kNone;
   return result;
+}
+
+std::unique_ptr<BrickAccel> load_subtree_payload(const std::shared_ptr<const MappedFile>& file,
+                                                 std::span<const char> payload, const SubtreeKey& key,
+                                                 const BrickSerializer& serializer) {
+  try {
+    const SerializedBrick serialized{payload, std::make_shared<const SubtreeMappingLease>(file), true};
+    Expected<std::unique_ptr<BrickAccel>> loaded =
+        serializer.load(serialized, key.brick_id, key.triangle_count);
+    return loaded.ok() ? std::move(loaded).value() : nullptr;
+  } catch (const std::bad_alloc&) {
+    return nullptr;
+  }
 }
 
 }  // namespace outcore

@@ -35,6 +35,7 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 
 #include "core/accel/brick_serializer.h"
@@ -71,8 +72,28 @@ enum class SubtreeRejection : uint8_t {
 };
 const char* subtree_rejection_name(SubtreeRejection rejection);
 
+// The accel's hold on a mapped subtree file. When someone else keeps the
+// mapping too (the tier, to load the brick again without mapping it again),
+// dropping the lease releases the pages the accel read (MappedFile::
+// release_pages), so an evicted brick holds no RSS; otherwise dropping the
+// last holder unmaps the file.
+struct SubtreeMappingLease {
+  explicit SubtreeMappingLease(std::shared_ptr<const MappedFile> mapped) : file(std::move(mapped)) {}
+  ~SubtreeMappingLease() {
+    if (file.use_count() > 1) file->release_pages();
+  }
+  SubtreeMappingLease(const SubtreeMappingLease&) = delete;
+  SubtreeMappingLease& operator=(const SubtreeMappingLease&) = delete;
+
+  std::shared_ptr<const MappedFile> file;
+};
+
 struct SubtreeReadResult {
   std::unique_ptr<BrickAccel> accel;  // set when rejection == kNone
+  // When loaded: the mapping and the payload's bytes in it, for
+  // load_subtree_payload() to load the brick again.
+  std::shared_ptr<const MappedFile> file;
+  std::span<const char> payload;
   SubtreeRejection rejection = SubtreeRejection::kAbsent;
   std::string message;  // why, naming the file, when rejected (not when absent)
   uint64_t file_bytes = 0;
@@ -92,5 +113,13 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
                                     const BrickSerializer& serializer,
                                     const std::optional<FileIdentity>& trusted = std::nullopt);
+
+// Loads again, in place and without checks, a payload read_subtree_file()
+// loaded from `file` before (the file's bytes cannot have changed under the
+// mapping: the tier never writes a file in place). nullptr when the
+// serialiser refuses it (it never should).
+std::unique_ptr<BrickAccel> load_subtree_payload(const std::shared_ptr<const MappedFile>& file,
+                                                 std::span<const char> payload, const SubtreeKey& key,
+                                                 const BrickSerializer& serializer);
 
 }  // namespace outcore

@@ -70,7 +70,7 @@ Expected<std::unique_ptr<SubtreeTier>> SubtreeTier::open(const SubtreeTierOption
   std::sort(found.begin(), found.end());
   std::lock_guard lock(tier->mutex_);
   for (const auto& [modified, file] : found) {
-    tier->files_[file.first] = {file.second, ++tier->use_clock_, std::nullopt};
+    tier->files_[file.first] = {file.second, ++tier->use_clock_, std::nullopt, nullptr, {}};
     ++tier->counters_.files;
     tier->counters_.bytes += file.second;
   }
@@ -92,10 +92,38 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
   const std::string path = path_of(key);
   const auto start = Clock::now();
   std::optional<FileIdentity> trusted;
+  std::shared_ptr<const MappedFile> kept;
+  std::span<const char> kept_payload;
   {
     std::lock_guard lock(mutex_);
     const auto it = files_.find(name);
-    if (it != files_.end()) trusted = it->second.known_good;
+    if (it != files_.end()) {
+      trusted = it->second.known_good;
+      kept = it->second.mapping;
+      kept_payload = it->second.payload;
+    }
+  }
+  // The kept mapping serves while the path still names the file it maps,
+  // unchanged (an edited, replaced or deleted file goes the full way).
+  if (kept != nullptr && trusted.has_value() && kept->identity() == *trusted) {
+    const Expected<FileIdentity> now = file_identity(path);
+    if (!now.ok() || !(*now == *trusted)) kept = nullptr;
+  } else {
+    kept = nullptr;
+  }
+  if (kept != nullptr) {
+    std::unique_ptr<BrickAccel> accel = load_subtree_payload(kept, kept_payload, key, serializer_);
+    if (accel != nullptr) {
+      const double seconds = seconds_since(start);
+      std::lock_guard lock(mutex_);
+      ++counters_.loads;
+      ++counters_.loads_kept;
+      counters_.bytes_read += kept->bytes().size();
+      counters_.load_seconds += seconds;
+      const auto it = files_.find(name);
+      if (it != files_.end()) it->second.last_use = ++use_clock_;
+      return accel;
+    }
   }
   SubtreeReadResult read = read_subtree_file(path, key, serializer_, trusted);
   const double seconds = seconds_since(start);
@@ -112,6 +140,7 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
         it->second.last_use = ++use_clock_;
         it->second.known_good = read.identity;
       }
+      keep_mapping_locked(name, read);
       return std::move(read.accel);
     }
     case SubtreeRejection::kAbsent:
@@ -178,7 +207,7 @@ std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const Bric
     return nullptr;
   }
   forget_locked(name);  // a file another process wrote meanwhile was replaced
-  files_[name] = {bytes, ++use_clock_, ours};
+  files_[name] = {bytes, ++use_clock_, ours, nullptr, {}};
   ++counters_.files;
   counters_.bytes += bytes;
   ++counters_.writes;
@@ -188,7 +217,23 @@ std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const Bric
   // The written file, mapped in place. Deleted meanwhile (a bound, another
   // process): nullptr, the caller keeps the built one; replaced by another
   // process since the rename (another identity): checked in full.
-  return read_subtree_file(path_of(key), key, serializer_, ours).accel;
+  SubtreeReadResult read = read_subtree_file(path_of(key), key, serializer_, ours);
+  if (read.accel != nullptr) {
+    lock.lock();
+    keep_mapping_locked(name, read);
+  }
+  return std::move(read.accel);
+}
+
+void SubtreeTier::keep_mapping_locked(const std::string& name, const SubtreeReadResult& read) {
+  const auto it = files_.find(name);
+  if (it == files_.end() || read.file == nullptr || it->second.mapping == read.file) return;
+  if (it->second.mapping == nullptr) {
+    if (kept_mappings_ >= kMaxKeptMappings) return;
+    ++kept_mappings_;
+  }
+  it->second.mapping = read.file;
+  it->second.payload = read.payload;
 }
 
 void SubtreeTier::evict_locked(uint64_t incoming) {
@@ -209,6 +254,7 @@ void SubtreeTier::forget_locked(const std::string& name) {
   if (it == files_.end()) return;
   --counters_.files;
   counters_.bytes -= it->second.bytes;
+  if (it->second.mapping != nullptr) --kept_mappings_;
   files_.erase(it);
 }
 

@@ -38,6 +38,16 @@
 //   modification time), and loads of files this tier wrote, skip those checks
 //   and cost a mapping and a header check. A file replaced by another
 //   process (a new inode) is checked again.
+// - Mappings are kept (up to kMaxKeptMappings): a loaded or written file
+//   stays mapped after the cache evicts its brick, with its pages released
+//   (MappedFile::release_pages: they leave the RSS, the page cache keeps
+//   them), and the next load of that brick reuses the mapping while the path
+//   still names that file unchanged (one stat): no open, no mmap, no header
+//   check. Mapping and unmapping take the process's mapping
+//   lock for writing, which stalls every other thread's page faults; a warm
+//   batch at a quarter budget loads thousands of bricks. A kept mapping is
+//   dropped when this tier deletes the file or forgets it, and not used when
+//   the file was replaced, edited or deleted since (it is then read again).
 //
 // Thread-safety: all member functions may be called from any thread; one
 // mutex guards the index and is held for renames and deletions, never while
@@ -76,6 +86,7 @@ struct SubtreeTierCounters {
   uint64_t bytes_read = 0;  // of the files loaded
   uint64_t bytes_written = 0;
   uint64_t loads_checked = 0;  // of the loads, those that checked the file in full
+  uint64_t loads_kept = 0;     // of the loads, those that reused a kept mapping
   double load_seconds = 0;     // map + check + deserialise, summed over loads
   double write_seconds = 0;    // serialise + write + rename, summed over writes
   uint64_t files = 0;          // in the directory now, as far as this tier knows
@@ -83,6 +94,10 @@ struct SubtreeTierCounters {
 
   uint64_t rejected() const { return rejected_corrupt + rejected_version + rejected_stale; }
 };
+
+// Kept mappings at most (each is one of the process's memory mappings, which
+// Linux limits to vm.max_map_count, 65,530 by default).
+inline constexpr uint64_t kMaxKeptMappings = 16384;
 
 class SubtreeTier {
  public:
@@ -114,6 +129,9 @@ class SubtreeTier {
     uint64_t last_use = 0;
     // The file as this tier wrote or last checked it in full.
     std::optional<FileIdentity> known_good;
+    // That file kept mapped, and its payload, to load it again (see above).
+    std::shared_ptr<const MappedFile> mapping;
+    std::span<const char> payload;
   };
 
   SubtreeTier(const SubtreeTierOptions& options, const BrickSerializer& serializer);
@@ -122,6 +140,9 @@ class SubtreeTier {
   // bytes fit in the bound.
   void evict_locked(uint64_t incoming);
   void forget_locked(const std::string& name);
+  // Under the lock: keeps `read`'s mapping in the entry for `name`, if known
+  // and below the limit.
+  void keep_mapping_locked(const std::string& name, const SubtreeReadResult& read);
 
   const SubtreeTierOptions options_;
   const BrickSerializer& serializer_;
@@ -130,6 +151,7 @@ class SubtreeTier {
   mutable std::mutex mutex_;
   std::map<std::string, FileEntry> files_;  // by file name
   uint64_t use_clock_ = 0;
+  uint64_t kept_mappings_ = 0;
   uint64_t temp_sequence_ = 0;
   bool logged_write_failure_ = false;
   SubtreeTierCounters counters_;

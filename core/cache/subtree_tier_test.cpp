@@ -210,6 +210,7 @@ TEST_F(SubtreeTierTest, FilesAreCheckedInFullOnceThenTrustedUntilReplaced) {
     EXPECT_EQ(c.writes, bricks());
     EXPECT_EQ(c.loads, bricks());
     EXPECT_EQ(c.loads_checked, 0u);
+    EXPECT_EQ(c.loads_kept, bricks()) << "the written files stay mapped: reloads map nothing";
   }
   auto reader = make_cache(budget, tier.path());
   acquire_all(*reader);
@@ -217,6 +218,7 @@ TEST_F(SubtreeTierTest, FilesAreCheckedInFullOnceThenTrustedUntilReplaced) {
   acquire_all(*reader);
   EXPECT_EQ(reader->counters().subtree.loads, 2u * bricks());
   EXPECT_EQ(reader->counters().subtree.loads_checked, bricks()) << "unchanged since: trusted";
+  EXPECT_EQ(reader->counters().subtree.loads_kept, bricks()) << "and loaded from the kept mappings";
 
   // Another process replaces two files (a new inode each): one with the same
   // bytes, checked again and used; one corrupt, caught by the check that a
@@ -236,6 +238,7 @@ TEST_F(SubtreeTierTest, FilesAreCheckedInFullOnceThenTrustedUntilReplaced) {
   EXPECT_EQ(c.subtree.rejected_corrupt, 1u);
   EXPECT_EQ(c.builds, 1u) << "the corrupt file's brick is rebuilt";
   EXPECT_EQ(c.subtree.loads, 3u * bricks() - 1);
+  EXPECT_EQ(c.subtree.loads_kept, 2u * bricks() - 2) << "a replaced file's kept mapping is not used";
 }
 
 TEST_F(SubtreeTierTest, BadFilesFallBackToARebuildWithTheRightCounter) {

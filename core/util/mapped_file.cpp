@@ -53,6 +53,11 @@ void MappedFile::will_need() const {
   if (data_ != nullptr) (void)madvise(const_cast<char*>(data_), size_, MADV_WILLNEED);  // a hint
 }
 
+void MappedFile::release_pages() const {
+  // A read-only private mapping has no dirty pages: dropping them loses nothing.
+  if (data_ != nullptr) (void)madvise(const_cast<char*>(data_), size_, MADV_DONTNEED);
+}
+
 Expected<MappedFile> MappedFile::open(const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) {

@@ -54,6 +54,12 @@ class MappedFile {
   std::span<const char> bytes() const { return {data_, size_}; }
   // A hint (MADV_WILLNEED) that all of the file is about to be read.
   void will_need() const;
+  // Unmaps the pages read so far (MADV_DONTNEED) but keeps the mapping: they
+  // leave this process's RSS (the page cache keeps them) and are faulted in
+  // again, with the same bytes, when next read. Cheaper than unmapping and
+  // mapping again: no mapping changes, so other threads' page faults are not
+  // held up by the process's mapping lock.
+  void release_pages() const;
   // The mapped file's identity when it was opened.
   const FileIdentity& identity() const { return identity_; }
 
