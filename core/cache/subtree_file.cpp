@@ -37,6 +37,20 @@ std::string describe(const SubtreeKey& key) {
          key.structure_key + "'";
 }
 
+// The serialiser's load of `payload`, in place, the accel holding `file`
+// through a lease; never throws.
+Expected<std::unique_ptr<BrickAccel>> load_leased(std::shared_ptr<const MappedFile> file,
+                                                  std::span<const char> payload, const SubtreeKey& key,
+                                                  const BrickSerializer& serializer, bool known_good) {
+  try {
+    const SerializedBrick serialized{payload, std::make_shared<const SubtreeMappingLease>(std::move(file)),
+                                     known_good};
+    return serializer.load(serialized, key.brick_id, key.triangle_count);
+  } catch (const std::bad_alloc&) {
+    return resource_exhausted("out of memory while loading");
+  }
+}
+
 }  // namespace
 
 const char* subtree_rejection_name(SubtreeRejection rejection) {
@@ -137,15 +151,10 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
   result.checked = !known_good;
   result.payload = bytes.subspan(payload_offset, checked - payload_offset);
   result.file = file;
-  try {
-    const SerializedBrick payload{result.payload,
-                                  std::make_shared<const SubtreeMappingLease>(std::move(file)), known_good};
-    Expected<std::unique_ptr<BrickAccel>> loaded = serializer.load(payload, key.brick_id, key.triangle_count);
-    if (!loaded.ok()) return rejected(SubtreeRejection::kCorrupt, path, loaded.status().message());
-    result.accel = std::move(loaded).value();
-  } catch (const std::bad_alloc&) {
-    return rejected(SubtreeRejection::kCorrupt, path, "out of memory while loading");
-  }
+  Expected<std::unique_ptr<BrickAccel>> loaded =
+      load_leased(std::move(file), result.payload, key, serializer, known_good);
+  if (!loaded.ok()) return rejected(SubtreeRejection::kCorrupt, path, loaded.status().message());
+  result.accel = std::move(loaded).value();
   result.rejection = SubtreeRejection::kNone;
   return result;
 }
@@ -153,14 +162,8 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
 std::unique_ptr<BrickAccel> load_subtree_payload(const std::shared_ptr<const MappedFile>& file,
                                                  std::span<const char> payload, const SubtreeKey& key,
                                                  const BrickSerializer& serializer) {
-  try {
-    const SerializedBrick serialized{payload, std::make_shared<const SubtreeMappingLease>(file), true};
-    Expected<std::unique_ptr<BrickAccel>> loaded =
-        serializer.load(serialized, key.brick_id, key.triangle_count);
-    return loaded.ok() ? std::move(loaded).value() : nullptr;
-  } catch (const std::bad_alloc&) {
-    return nullptr;
-  }
+  Expected<std::unique_ptr<BrickAccel>> loaded = load_leased(file, payload, key, serializer, true);
+  return loaded.ok() ? std::move(loaded).value() : nullptr;
 }
 
 }  // namespace outcore

@@ -25,10 +25,6 @@ double max_abs(const Vec3d& v) {
   return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)});
 }
 
-double norm(const Vec3d& v) {
-  return length(v);
-}
-
 // Euclidean distance (an upper bound of the max-norm one E bounds) between
 // the exact line o + t d and a triangle, in float64. Differences of floats are
 // exact in float64 at these magnitudes; the cross products keep the result
@@ -49,9 +45,9 @@ double line_triangle_distance(const Vec3d& o, const Vec3d& d, const Triangle& tr
     const double bb = dot(b, b);
     double s = bb > 0 ? -dot(a, b) / bb : 0.0;
     s = std::clamp(s, 0.0, 1.0);
-    for (const double si : {s, 0.0, 1.0}) best = std::min(best, norm(a + b * si));
+    for (const double si : {s, 0.0, 1.0}) best = std::min(best, length(a + b * si));
   }
-  return best / norm(d);
+  return best / length(d);
 }
 
 struct Case {
@@ -105,8 +101,8 @@ TEST(ProxyRounding, EveryStructuresAcceptedHitsLieWithinTheRoundingBound) {
     const double domain = proxy.frame().domain_magnitude_WS();
 
     // Rays: aimed at a point of an edge (or a corner) pushed in or out within
-    // the triangle's plane by up to 64 float epsilons of the magnitudes
-    // involved, from a random origin within the reach; a third of them
+    // the triangle's plane by up to 4096 float epsilons of the magnitudes
+    // involved (log-uniformly), from a random origin within the reach; a third of them
     // grazing (nearly in the triangle's plane).
     std::vector<Ray> rays;
     for (int r = 0; r < 60000; ++r) {
