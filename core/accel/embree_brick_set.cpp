@@ -22,6 +22,16 @@ Expected<std::unique_ptr<EmbreeBrickSet>> EmbreeBrickSet::build(
   const auto with_scene = static_cast<uint64_t>(std::count_if(
       bricks.begin(), bricks.end(), [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; }));
   if (with_scene == 0) return set;
+  if (with_scene == 1) {
+    // One brick to trace: its own scene, without a level of instancing.
+    const EmbreeBrickAccel* only = *std::find_if(
+        bricks.begin(), bricks.end(), [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; });
+    set->scene_ = only->scene_;
+    set->owns_scene_ = false;
+    set->max_extent_ = only->max_extent_;
+    set->center_ = only->center_;
+    return set;
+  }
   const std::string what = "building the scene over " + std::to_string(bricks.size()) + " resident bricks";
   // Column-major 3x4: the identity, no translation.
   static constexpr float kIdentity[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};
@@ -69,7 +79,7 @@ Expected<std::unique_ptr<EmbreeBrickSet>> EmbreeBrickSet::build(
 }
 
 EmbreeBrickSet::~EmbreeBrickSet() {
-  if (scene_ == nullptr) return;
+  if (scene_ == nullptr || !owns_scene_) return;
   auto device = EmbreeDevice::instance();  // exists: it made scene_
   EmbreeDevice::MeasuredSection section(**device, /*allow_parallel=*/false);
   rtcReleaseScene(scene_);

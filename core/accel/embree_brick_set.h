@@ -5,7 +5,9 @@
 // rounds of per-brick tracing and one Embree call per brick visit by
 // Embree's own two-level traversal (its top-level BVH over the bricks'
 // boxes); nothing is loaded, built or copied, the set only refers to the
-// bricks' scenes.
+// bricks' scenes. When only one brick has triangles, the set is that brick's
+// own scene (no level of instancing: a scene packed as one brick is traced as
+// one Embree scene).
 //
 // Answers are bitwise those of tracing the bricks one by one in front-to-back
 // order: the triangle tests are the bricks' own on the same ray values (an
@@ -53,7 +55,8 @@ class EmbreeBrickSet {
   // The bricks it was built over, in the order given.
   const std::vector<const EmbreeBrickAccel*>& bricks() const { return bricks_; }
   // What Embree's memory monitor attributed to the set's own scene (its
-  // top-level BVH), plus the untracked objects (an instance per brick).
+  // top-level BVH), plus the untracked objects (an instance per brick); 0
+  // when only one brick has triangles (its own scene is used).
   uint64_t memory_bytes() const { return memory_bytes_; }
   // Rays (closest and any hit) that went to Embree in coherent streams.
   uint64_t coherent_rays() const { return coherent_rays_.load(std::memory_order_relaxed); }
@@ -63,6 +66,7 @@ class EmbreeBrickSet {
   EmbreeBrickAccel::TraceTarget target() const;
 
   RTCScene scene_ = nullptr;  // null when no brick has triangles
+  bool owns_scene_ = true;    // false: the scene of the only brick with triangles
   std::vector<const EmbreeBrickAccel*> bricks_;
   float max_extent_ = 0;
   Vec3f center_;

@@ -100,6 +100,50 @@ TEST(EmbreeBrickSet, AnswersBitwiseAsItsBricksTracedOneAfterAnother) {
   }
 }
 
+// A set over one brick with triangles (and one without) traces that brick's
+// own scene: no instancing level, no bytes of its own, the brick's answers
+// bitwise, ties included.
+TEST(EmbreeBrickSet, OneBrickWithTrianglesIsTracedThroughItsOwnScene) {
+  BrickData with = with_geometry(random_triangles(2000, 4), 0, 0);
+  for (uint32_t k = 0; k < 30; ++k) {
+    with.triangles.push_back(with.triangles[k * 5]);
+    with.ids.push_back({1, k * 5});
+  }
+  const Aabb box = bounds_of(with);
+  BrickData without;
+  without.brick_id = 1;
+  for (uint32_t k = 0; k < 4; ++k) {
+    const Vec3f p(float(k), 0, 0);
+    without.triangles.push_back({p, p, p});
+    without.ids.push_back({2, k});
+  }
+  auto brick = build_or_die(std::move(with));
+  auto empty = build_or_die(std::move(without));
+  ASSERT_NE(brick, nullptr);
+  ASSERT_NE(empty, nullptr);
+  const std::vector<const EmbreeBrickAccel*> pointers = {empty.get(), brick.get()};
+  auto set = EmbreeBrickSet::build(pointers);
+  ASSERT_TRUE(set.ok()) << set.status().to_string();
+  EXPECT_EQ((*set)->memory_bytes(), 0u);
+  const std::vector<Ray> rays = rays_from_outside(box, 3000, 12);
+  std::vector<uint32_t> ids(rays.size());
+  for (uint32_t i = 0; i < ids.size(); ++i) ids[i] = i;
+  std::vector<Hit> direct(rays.size()), through_set(rays.size());
+  brick->intersect(ids, rays.data(), direct.data());
+  (*set)->intersect(ids, rays.data(), through_set.data());
+  EXPECT_TRUE(bitwise_equal(through_set, direct));
+  std::size_t hits = 0;
+  for (const Hit& h : through_set) {
+    hits += h.is_hit();
+    EXPECT_NE(h.geometry_id, 1u) << "a copy under a larger id won a tie";
+  }
+  EXPECT_GT(hits, rays.size() / 4);
+  std::vector<uint8_t> occluded_direct(rays.size(), 0), occluded_set(rays.size(), 0);
+  brick->occluded(ids, rays.data(), occluded_direct.data());
+  (*set)->occluded(ids, rays.data(), occluded_set.data());
+  EXPECT_EQ(occluded_set, occluded_direct);
+}
+
 // Bricks without a triangle Embree can hit (all degenerate) give a set
 // without a scene: it answers nothing and changes no answer it is given.
 TEST(EmbreeBrickSet, BricksWithoutTrianglesGiveASetThatAnswersNothing) {

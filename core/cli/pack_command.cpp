@@ -28,8 +28,11 @@ void add_pack_command(CLI::App& app, int& exit_code) {
                       "). geometry_id = position in this list")
       ->required();
   cmd->add_option("-o,--output", options->output, "Scene store directory to create")->required();
-  cmd->add_option("--brick-tris", options->brick_triangles, "Most triangles in one brick")
-      ->capture_default_str();
+  auto brick_triangles = std::make_shared<uint32_t>(0);
+  CLI::Option* brick_option = cmd->add_option(
+      "--brick-tris", *brick_triangles,
+      "Most triangles in one brick (default " + std::to_string(kDefaultBrickTriangles) +
+          "; a scene of at most " + std::to_string(kSmallSceneTriangles) + " triangles is then one brick)");
   cmd->add_option("--mem-mb", options->memory_mb, "Peak memory bound for packing, MiB")
       ->capture_default_str();
   cmd->add_option("--vertex-mem-mb", options->vertex_memory_mb,
@@ -40,7 +43,8 @@ void add_pack_command(CLI::App& app, int& exit_code) {
   auto no_sync = std::make_shared<bool>(false);
   cmd->add_flag("--no-sync", *no_sync, "Skip fsync before the final rename (faster, not durable)");
   cmd->add_flag("-q,--quiet", *quiet, "No progress bars");
-  cmd->callback([options, quiet, no_sync, &exit_code] {
+  cmd->callback([options, quiet, no_sync, brick_triangles, brick_option, &exit_code] {
+    if (brick_option->count() > 0) options->brick_triangles = *brick_triangles;
     options->show_progress = !*quiet;
     options->sync = !*no_sync;
     install_cancel_signal_handlers();
@@ -55,7 +59,7 @@ void add_pack_command(CLI::App& app, int& exit_code) {
                 static_cast<unsigned long long>(s.degenerate_triangles), options->inputs.size(),
                 options->inputs.size() == 1 ? "" : "s", s.bricks);
     std::printf("  brick triangles  min %u / median %u / max %u (target <= %u)\n", s.min_brick_triangles,
-                s.median_brick_triangles, s.max_brick_triangles, options->brick_triangles);
+                s.median_brick_triangles, s.max_brick_triangles, s.brick_triangles_target);
     std::printf("  store            %s, %s on disk, upper hierarchy depth %u\n", options->output.c_str(),
                 human_bytes(static_cast<double>(s.bytes_on_disk)).c_str(), s.upper_depth);
     std::printf("  time             %.2f s, %.2f M tris/s\n", s.seconds,

@@ -189,7 +189,8 @@ class ScenePacker {
   std::vector<std::unique_ptr<TriangleSource>> sources_;
   ScanResult scan_;
   MemoryPlan memory_{};
-  uint64_t group_capacity_ = 0;  // triangles that fit in memory at once
+  uint64_t group_capacity_ = 0;   // triangles that fit in memory at once
+  uint32_t brick_triangles_ = 0;  // the target in effect: the option's, or the default's (run())
   TemporaryDirectory temp_;
   BufferedFileWriter brick_file_;
   std::vector<char> staging_;
@@ -208,9 +209,10 @@ class ScenePacker {
 Status ScenePacker::validate_options() const {
   if (options_.inputs.empty()) return invalid_argument("no inputs given");
   if (options_.output.empty()) return invalid_argument("no output store given (-o)");
-  if (options_.brick_triangles == 0 || options_.brick_triangles > kMaxBrickTriangles) {
+  if (options_.brick_triangles.has_value() &&
+      (*options_.brick_triangles == 0 || *options_.brick_triangles > kMaxBrickTriangles)) {
     return invalid_argument("--brick-tris must be between 1 and " + std::to_string(kMaxBrickTriangles) +
-                            ", got " + std::to_string(options_.brick_triangles));
+                            ", got " + std::to_string(*options_.brick_triangles));
   }
   if (options_.memory_mb < kMinPackMemoryMb) {
     return invalid_argument("--mem-mb must be at least " + std::to_string(kMinPackMemoryMb) + ", got " +
@@ -363,7 +365,7 @@ Status ScenePacker::build_group_in_memory(const PackedStream& stream, uint64_t c
   PhaseTimer timer(phases_.bricks);
   OUTCORE_RETURN_IF_ERROR(check_cancel());
   BrickPartitionerConfig config;
-  config.max_triangles = options_.brick_triangles;
+  config.max_triangles = brick_triangles_;
   const std::vector<BrickRange> ranges = partition_into_bricks(triangles, config);
   for (const BrickRange& range : ranges) {
     OUTCORE_RETURN_IF_ERROR(check_cancel());
@@ -746,7 +748,7 @@ Status ScenePacker::write_subgroups(PackedTriangle* data, std::span<const uint64
   std::vector<uint64_t> offsets(sub_counts.size());
   for (std::size_t s = 1; s < sub_counts.size(); ++s) offsets[s] = offsets[s - 1] + sub_counts[s - 1];
   BrickPartitionerConfig config;
-  config.max_triangles = options_.brick_triangles;
+  config.max_triangles = brick_triangles_;
   struct Item {
     std::size_t sub;
     std::vector<BrickRange> ranges;
@@ -794,7 +796,7 @@ Status ScenePacker::write_subgroups(PackedTriangle* data, std::span<const uint64
 Status ScenePacker::pack_generated() {
   const uint64_t count = scan_.triangles;
   const uint64_t sub_max =
-      std::clamp<uint64_t>(uint64_t{options_.brick_triangles} * kSubgroupBricks, kMinSubgroupTriangles,
+      std::clamp<uint64_t>(uint64_t{brick_triangles_} * kSubgroupBricks, kMinSubgroupTriangles,
                            std::max<uint64_t>(group_capacity_, 1));
   std::vector<uint32_t> all_chunks(chunks_.size());
   for (uint32_t i = 0; i < all_chunks.size(); ++i) all_chunks[i] = i;
@@ -888,7 +890,7 @@ Status ScenePacker::pack_generated() {
       largest = std::max(largest, plan.group_counts[g]);
       for (std::size_t c = 0; c < cells.size(); ++c)
         masked[c] = plan.cell_to_group[c] == g ? cells[c] : CellStats{};
-      const GroupPlan sub = plan_groups(grid, masked, sub_max, options_.brick_triangles);
+      const GroupPlan sub = plan_groups(grid, masked, sub_max, brick_triangles_);
       for (std::size_t c = 0; c < cells.size(); ++c) {
         if (plan.cell_to_group[c] == g) cell_to_sub[c] = sub.cell_to_group[c];
       }
@@ -986,12 +988,21 @@ Expected<PackSummary> ScenePacker::run() {
   group_capacity_ = budget > reserved ? (budget - reserved) / sizeof(PackedTriangle) : 0;
   if (options_.max_group_triangles > 0)
     group_capacity_ = std::min(group_capacity_, options_.max_group_triangles);
-  group_capacity_ = std::max<uint64_t>(group_capacity_, options_.brick_triangles);
-  if (group_capacity_ < options_.brick_triangles ||
-      static_cast<uint64_t>(options_.brick_triangles) * sizeof(PackedTriangle) + reserved > budget) {
+  const auto brick_fits = [&](uint64_t triangles) {
+    return triangles * sizeof(PackedTriangle) + reserved <= budget;
+  };
+  if (options_.brick_triangles.has_value()) {
+    brick_triangles_ = *options_.brick_triangles;
+  } else {
+    // The default: one brick for a small scene (when memory allows it).
+    const bool one_brick = scan_.triangles <= kSmallSceneTriangles && brick_fits(scan_.triangles);
+    brick_triangles_ =
+        one_brick ? static_cast<uint32_t>(std::max<uint64_t>(scan_.triangles, 1)) : kDefaultBrickTriangles;
+  }
+  group_capacity_ = std::max<uint64_t>(group_capacity_, brick_triangles_);
+  if (group_capacity_ < brick_triangles_ || !brick_fits(brick_triangles_)) {
     return invalid_argument("--mem-mb " + std::to_string(options_.memory_mb) +
-                            " is too small for bricks of " + std::to_string(options_.brick_triangles) +
-                            " triangles");
+                            " is too small for bricks of " + std::to_string(brick_triangles_) + " triangles");
   }
 
   OUTCORE_RETURN_IF_ERROR(brick_file_.create(temp_.path() + "/" + kBrickDataFileName, memory_.brick_buffer,
@@ -1019,7 +1030,7 @@ Expected<PackSummary> ScenePacker::run() {
   Manifest manifest;
   manifest.format_version = kStoreFormatVersion;
   manifest.outcore_version = OUTCORE_VERSION;
-  manifest.brick_triangles_target = options_.brick_triangles;
+  manifest.brick_triangles_target = brick_triangles_;
   manifest.bounds = scan_.bounds;
   manifest.triangle_count = scan_.triangles;
   manifest.degenerate_count = scan_.degenerate;
@@ -1072,6 +1083,7 @@ Expected<PackSummary> ScenePacker::run() {
   std::vector<uint32_t> sizes;
   for (const BrickRecord& b : manifest.bricks) sizes.push_back(b.triangle_count);
   std::sort(sizes.begin(), sizes.end());
+  summary.brick_triangles_target = brick_triangles_;
   summary.min_brick_triangles = sizes.front();
   summary.median_brick_triangles = sizes[sizes.size() / 2];
   summary.max_brick_triangles = sizes.back();

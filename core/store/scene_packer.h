@@ -16,6 +16,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,8 +27,12 @@ namespace outcore {
 struct PackOptions {
   std::vector<std::string> inputs;  // geometry_id = position in this list
   std::string output;               // the store directory to create
-  // Target brick size: no brick holds more triangles than this.
-  uint32_t brick_triangles = 32768;
+  // Target brick size: no brick holds more triangles than this. Unset (the
+  // default): kDefaultBrickTriangles, except that a scene of at most
+  // kSmallSceneTriangles triangles is packed as one brick (a brick that
+  // small, ~20 MiB built, gains nothing from being loaded and built in parts,
+  // and one brick spares every ray a level of traversal: docs/DESIGN.md).
+  std::optional<uint32_t> brick_triangles;
   // Peak memory bound for the packer's own data, in MiB (>= 32).
   uint64_t memory_mb = 1024;
   // Part of memory_mb that OBJ/PLY readers may use for vertex positions, in
@@ -61,6 +66,7 @@ struct PackSummary {
   uint64_t triangles = 0;
   uint64_t degenerate_triangles = 0;
   uint32_t bricks = 0;
+  uint32_t brick_triangles_target = 0;  // in effect (the option's or the default's)
   uint32_t min_brick_triangles = 0;
   uint32_t median_brick_triangles = 0;
   uint32_t max_brick_triangles = 0;
@@ -79,5 +85,9 @@ Expected<PackSummary> pack_scene(const PackOptions& options);
 inline constexpr uint64_t kMinPackMemoryMb = 32;
 // Largest accepted brick size (bricks are built and loaded whole).
 inline constexpr uint32_t kMaxBrickTriangles = 1u << 24;
+// PackOptions::brick_triangles == 0: bricks of at most this many triangles...
+inline constexpr uint32_t kDefaultBrickTriangles = 32768;
+// ... unless the whole scene has at most this many: then one brick.
+inline constexpr uint64_t kSmallSceneTriangles = 4 * uint64_t{kDefaultBrickTriangles};
 
 }  // namespace outcore

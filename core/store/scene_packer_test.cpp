@@ -508,6 +508,38 @@ TEST(ScenePackerIds, DegenerateTrianglesAreKeptCountedAndKeepTheirIds) {
 
 // ---- options --------------------------------------------------------------------
 
+// Without a brick size: a scene of at most kSmallSceneTriangles triangles is
+// one brick; a larger one is cut into bricks of at most
+// kDefaultBrickTriangles, and the manifest names the target in effect.
+TEST(ScenePackerOptions, DefaultBrickSizeKeepsSmallScenesWholeAndCutsLargeOnes) {
+  struct Case {
+    const char* input;
+    uint64_t triangles;
+  };
+  for (const Case& c : {Case{"gen:sphere?level=6", 81920}, Case{"gen:sphere?level=7", 327680}}) {
+    SCOPED_TRACE(c.input);
+    TempDir dir;
+    PackOptions options = options_for({c.input}, dir.file("s"), 1);
+    options.brick_triangles.reset();
+    const auto summary = pack_scene(options);
+    ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+    EXPECT_EQ(summary->triangles, c.triangles);
+    auto store = SceneStore::open(dir.file("s"));
+    ASSERT_TRUE(store.ok()) << store.status().to_string();
+    const Manifest& manifest = (*store)->manifest();
+    if (c.triangles <= kSmallSceneTriangles) {
+      EXPECT_EQ(summary->bricks, 1u);
+      EXPECT_EQ(summary->brick_triangles_target, c.triangles);
+      EXPECT_EQ(manifest.brick_triangles_target, c.triangles);
+    } else {
+      EXPECT_GE(summary->bricks, c.triangles / kDefaultBrickTriangles);
+      EXPECT_EQ(summary->brick_triangles_target, kDefaultBrickTriangles);
+      EXPECT_EQ(manifest.brick_triangles_target, kDefaultBrickTriangles);
+      EXPECT_LE(summary->max_brick_triangles, kDefaultBrickTriangles);
+    }
+  }
+}
+
 TEST(ScenePackerOptions, RejectsZeroOversizedBrickTrianglesAndTooSmallMemoryWithoutOutput) {
   TempDir dir;
   const std::string out = dir.file("s");
