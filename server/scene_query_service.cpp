@@ -198,7 +198,7 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
   if (!is_loopback_peer(context->peer())) {
     return refuse("shared payloads are accepted from loopback peers only, not from " + context->peer());
   }
-  auto object = open_shared_payload(request, Traits::kReplyBytesPerRay);
+  auto object = open_shared_payload(request, Traits::kReplyBytesPerRay, shared_mappings_);
   if (!object.ok()) {
     if (object.status().code() == StatusCode::kFailedPrecondition) return refuse(object.status().message());
     return to_grpc_status(object.status().with_context("request"));
@@ -213,7 +213,7 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     const uint64_t first = group * kSharedGroupRays;
     const uint64_t count = std::min(kSharedGroupRays, n - first);
     OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n - first));
-    const Status read = read_shared_rays(*object, request, first, count, buffers->rays);
+    const Status read = read_shared_rays(**object, request, first, count, buffers->rays);
     if (!read.ok()) return to_grpc_status(read.with_context("request"));
     const std::span<const Ray> rays(buffers->rays.data(), count);
     BatchPosition position;
@@ -226,7 +226,7 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     const Status status = trace<kKind>(rays, buffers->answers.data(), request, &stats);
     if (!status.ok()) return to_grpc_status(status);
     const Status written =
-        write_shared_answers(*object, request.shared(), first * Traits::kReplyBytesPerRay,
+        write_shared_answers(**object, request.shared(), first * Traits::kReplyBytesPerRay,
                              std::span<const uint8_t>(buffers->answers.data(), answer_bytes));
     if (!written.ok()) return to_grpc_status(written.with_context("request"));
     add_stats(stats, wire_stats);

@@ -32,6 +32,7 @@
 #include "core/query/query_types.h"
 #include "outcore/v1/scene_query.grpc.pb.h"
 #include "server/ray_batch.h"
+#include "server/shared_mapping_cache.h"
 #include "server/stream_pipeline.h"
 
 namespace outcore::server {
@@ -172,6 +173,8 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   std::atomic<uint64_t> rays_in_brick_set_{0};
   std::mutex shared_buffers_mutex_;
   std::vector<std::unique_ptr<SharedBuffers>> spare_shared_buffers_;  // at most two
+  // Client objects of recent shared calls, kept mapped (shared_mapping_cache.h).
+  SharedMappingCache shared_mappings_;
 };
 
 }  // namespace outcore::server

@@ -85,8 +85,9 @@ bool is_loopback_peer(std::string_view peer) {
   return is_loopback_ip(host_of(address));
 }
 
-Expected<SharedMemoryObject> open_shared_payload(const v1::QueryRequest& request,
-                                                 uint64_t answer_bytes_per_ray) {
+Expected<std::shared_ptr<SharedMemoryObject>> open_shared_payload(const v1::QueryRequest& request,
+                                                                  uint64_t answer_bytes_per_ray,
+                                                                  SharedMappingCache& mappings) {
   const v1::RayBatch& batch = request.batch();
   const v1::SharedPayload& payload = request.shared();
   OUTCORE_ASSIGN_OR_RETURN(const uint32_t ray_bytes, check_batch_layout(batch));
@@ -123,20 +124,20 @@ Expected<SharedMemoryObject> open_shared_payload(const v1::QueryRequest& request
                             " and the answers " + range_text(payload.answers_offset(), answers_bytes) +
                             " overlap");
   }
-  auto object = SharedMemoryObject::open(payload.name(), map_bytes);
+  auto object = mappings.open(payload.name(), map_bytes);
   if (!object.ok()) {
     if (object.status().code() == StatusCode::kInvalidArgument) return object.status();
     return failed_precondition(object.status().message());
   }
   for (const auto& [what, offset, bytes] : {std::tuple{"rays", payload.rays_offset(), rays_bytes},
                                             std::tuple{"answers", payload.answers_offset(), answers_bytes}}) {
-    if (offset > object->size() || bytes > object->size() - offset) {
+    if (offset > (*object)->size() || bytes > (*object)->size() - offset) {
       return invalid_argument(std::string("shared: the ") + what + " " + range_text(offset, bytes) +
-                              " are not inside " + payload.name() + " (" + std::to_string(object->size()) +
+                              " are not inside " + payload.name() + " (" + std::to_string((*object)->size()) +
                               " bytes)");
     }
   }
-  OUTCORE_RETURN_IF_ERROR(object->check_token(payload.token()).with_context("shared.token"));
+  OUTCORE_RETURN_IF_ERROR((*object)->check_token(payload.token()).with_context("shared.token"));
   return object;
 }
 

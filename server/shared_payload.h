@@ -22,6 +22,7 @@
 #include "core/util/shared_memory.h"
 #include "core/util/status.h"
 #include "outcore/v1/scene_query.pb.h"
+#include "server/shared_mapping_cache.h"
 
 namespace outcore::server {
 
@@ -34,14 +35,16 @@ inline constexpr uint64_t kSharedGroupRays = uint64_t{1} << 20;
 // IPv4-mapped 127.x, "unix:..." and "unix-abstract:...".
 bool is_loopback_peer(std::string_view peer);
 
-// Checks the request's batch and shared payload, opens the object (mapping
-// only what its ranges need) and checks its token. INVALID_ARGUMENT for a
+// Checks the request's batch and shared payload, opens the object through
+// `mappings` (mapping only what its ranges need, or reusing the mapping of an
+// earlier call on the same object) and checks its token. INVALID_ARGUMENT for a
 // malformed batch or payload (layout, count, non-empty batch.rays, a bad
 // name, ranges inside the header, outside the object or overlapping);
 // PERMISSION_DENIED for a token that does not match; FAILED_PRECONDITION
 // when the object cannot be opened (a client then sends bytes).
-Expected<SharedMemoryObject> open_shared_payload(const v1::QueryRequest& request,
-                                                 uint64_t answer_bytes_per_ray);
+Expected<std::shared_ptr<SharedMemoryObject>> open_shared_payload(const v1::QueryRequest& request,
+                                                                  uint64_t answer_bytes_per_ray,
+                                                                  SharedMappingCache& mappings);
 
 // Copies rays [first, first + count) of the batch out of the object into
 // `storage` (resized to at least `count`; F32X6 widened).

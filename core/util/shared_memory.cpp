@@ -92,6 +92,8 @@ SharedMemoryObject::~SharedMemoryObject() {
 SharedMemoryObject::SharedMemoryObject(SharedMemoryObject&& other) noexcept
     : name_(std::move(other.name_)),
       token_(std::move(other.token_)),
+      identity_(other.identity_),
+      descriptor_(std::exchange(other.descriptor_, -1)),
       data_(std::exchange(other.data_, nullptr)),
       size_(std::exchange(other.size_, 0)),
       mapped_(std::exchange(other.mapped_, 0)),
@@ -102,6 +104,8 @@ SharedMemoryObject& SharedMemoryObject::operator=(SharedMemoryObject&& other) no
     release();
     name_ = std::move(other.name_);
     token_ = std::move(other.token_);
+    identity_ = other.identity_;
+    descriptor_ = std::exchange(other.descriptor_, -1);
     data_ = std::exchange(other.data_, nullptr);
     size_ = std::exchange(other.size_, 0);
     mapped_ = std::exchange(other.mapped_, 0);
@@ -112,6 +116,8 @@ SharedMemoryObject& SharedMemoryObject::operator=(SharedMemoryObject&& other) no
 
 void SharedMemoryObject::release() {
   if (data_ != nullptr) munmap(data_, mapped_);
+  if (descriptor_ >= 0) ::close(descriptor_);
+  descriptor_ = -1;
   if (owner_) shm_unlink(name_.c_str());
   data_ = nullptr;
   size_ = 0;
@@ -135,9 +141,12 @@ Status SharedMemoryObject::check_name(std::string_view name) {
   return Status::Ok();
 }
 
-Expected<SharedMemoryObject> SharedMemoryObject::open(const std::string& name, std::size_t map_bytes) {
-  OUTCORE_RETURN_IF_ERROR(check_name(name));
-  const int fd = shm_open(name.c_str(), O_RDWR, 0);
+namespace {
+
+// shm_open(name) and fstat; the descriptor and what fstat said, or the
+// errors open() reports.
+Expected<std::pair<int, struct stat>> open_and_stat(const std::string& name, int flags) {
+  const int fd = shm_open(name.c_str(), flags, 0);
   if (fd < 0) {
     const int error = errno;
     if (error == ENOENT) return not_found("no shared-memory object " + name);
@@ -153,6 +162,32 @@ Expected<SharedMemoryObject> SharedMemoryObject::open(const std::string& name, s
     ::close(fd);
     return io_error("the shared-memory object " + name + " is not a regular object of this user");
   }
+  return std::pair{fd, info};
+}
+
+SharedObjectIdentity identity_of(const struct stat& info) {
+  return {static_cast<uint64_t>(info.st_dev), static_cast<uint64_t>(info.st_ino),
+          static_cast<uint64_t>(info.st_size)};
+}
+
+}  // namespace
+
+Expected<SharedObjectIdentity> SharedMemoryObject::identify(const std::string& name) {
+  OUTCORE_RETURN_IF_ERROR(check_name(name));
+  OUTCORE_ASSIGN_OR_RETURN(const auto opened, open_and_stat(name, O_RDONLY));
+  ::close(opened.first);
+  return identity_of(opened.second);
+}
+
+bool SharedMemoryObject::unlinked() const {
+  struct stat info {};
+  return descriptor_ >= 0 && fstat(descriptor_, &info) == 0 && info.st_nlink == 0;
+}
+
+Expected<SharedMemoryObject> SharedMemoryObject::open(const std::string& name, std::size_t map_bytes) {
+  OUTCORE_RETURN_IF_ERROR(check_name(name));
+  OUTCORE_ASSIGN_OR_RETURN(const auto opened, open_and_stat(name, O_RDWR));
+  const auto& [fd, info] = opened;
   const std::size_t size = static_cast<std::size_t>(info.st_size);
   const std::size_t mapped_bytes = std::min(size, map_bytes);
   char* data = nullptr;
@@ -167,8 +202,10 @@ Expected<SharedMemoryObject> SharedMemoryObject::open(const std::string& name, s
     }
     data = static_cast<char*>(mapped);
   }
-  ::close(fd);  // the mapping keeps the object
-  return SharedMemoryObject(name, data, size, mapped_bytes, /*owner=*/false);
+  SharedMemoryObject object(name, data, size, mapped_bytes, /*owner=*/false);
+  object.identity_ = identity_of(info);
+  object.descriptor_ = fd;  // for unlinked(); the mapping alone keeps the object
+  return object;
 }
 
 Expected<SharedMemoryObject> SharedMemoryObject::create(std::string_view suffix, std::size_t bytes) {
@@ -202,8 +239,11 @@ Expected<SharedMemoryObject> SharedMemoryObject::create(std::string_view suffix,
   if (mapped == MAP_FAILED) {
     return fail(io_error("cannot map the shared-memory object " + name + ": " + std::strerror(errno)));
   }
+  struct stat info {};
+  const bool stated = fstat(fd, &info) == 0;
   ::close(fd);
   SharedMemoryObject object(name, static_cast<char*>(mapped), bytes, bytes, /*owner=*/true);
+  if (stated) object.identity_ = identity_of(info);
   object.token_.resize(kTokenBytes);
   for (std::size_t i = 0; i < kTokenBytes; i += 4) {
     const uint32_t word = random();

@@ -31,6 +31,15 @@
 
 namespace outcore {
 
+// Which object a name stood for: it is the same object while these hold
+// (its contents, and so its times, change with every call).
+struct SharedObjectIdentity {
+  uint64_t device = 0;
+  uint64_t inode = 0;
+  uint64_t size = 0;
+  bool operator==(const SharedObjectIdentity&) const = default;
+};
+
 class SharedMemoryObject {
  public:
   // Names are "/outcore-" followed by 1..kMaxNameSuffix of [A-Za-z0-9_.-]:
@@ -58,6 +67,10 @@ class SharedMemoryObject {
   // object that is not a regular one of this process's user).
   static Expected<SharedMemoryObject> open(const std::string& name, std::size_t map_bytes = ~std::size_t{0});
 
+  // The identity of the object `name` names now (open, fstat, close; no
+  // mapping). Errors as open()'s.
+  static Expected<SharedObjectIdentity> identify(const std::string& name);
+
   // Creates a new object of `bytes` bytes (at least kHeaderBytes), named
   // kNamePrefix + `suffix` + a random tail, reserves its pages, maps it and
   // writes a fresh random token into its header (the client's side). The
@@ -84,6 +97,12 @@ class SharedMemoryObject {
   Status copy_in(std::size_t offset, const void* in, std::size_t in_bytes);
 
   const std::string& name() const { return name_; }
+  // What the object was when opened or created.
+  const SharedObjectIdentity& identity() const { return identity_; }
+  // True once no name refers to the object any more (its creator unlinked
+  // it): an opened object keeps its descriptor to tell. Keeping such a
+  // mapping keeps the object's memory allocated.
+  bool unlinked() const;
   // The object's size when it was opened or created.
   std::size_t size() const { return size_; }
   // Bytes mapped from offset 0 (size() for the creator).
@@ -101,6 +120,8 @@ class SharedMemoryObject {
 
   std::string name_;
   std::string token_;
+  SharedObjectIdentity identity_;
+  int descriptor_ = -1;  // an opened object's, for unlinked()
   char* data_ = nullptr;
   std::size_t size_ = 0;
   std::size_t mapped_ = 0;

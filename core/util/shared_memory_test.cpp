@@ -104,6 +104,33 @@ TEST(SharedMemoryObject, OrphansOfDeadClientsAreRemovedAndOthersKept) {
   }
 }
 
+// identify() names the object behind a name without mapping it; an opened
+// object keeps that identity and tells when its name was unlinked.
+TEST(SharedMemoryObject, IdentityFollowsTheObjectAndUnlinkedIsSeenThroughTheDescriptor) {
+  auto created = SharedMemoryObject::create("test", 8192);
+  ASSERT_TRUE(created.ok()) << created.status().message();
+  const std::string name = created->name();
+  auto identity = SharedMemoryObject::identify(name);
+  ASSERT_TRUE(identity.ok()) << identity.status().message();
+  EXPECT_EQ(identity->size, 8192u);
+  EXPECT_EQ(*identity, created->identity());
+  auto opened = SharedMemoryObject::open(name);
+  ASSERT_TRUE(opened.ok()) << opened.status().message();
+  EXPECT_EQ(opened->identity(), *identity);
+  EXPECT_FALSE(opened->unlinked());
+
+  truncate_object(name, 4096);  // same object, another size: another identity
+  auto shrunk = SharedMemoryObject::identify(name);
+  ASSERT_TRUE(shrunk.ok());
+  EXPECT_EQ(shrunk->inode, identity->inode);
+  EXPECT_NE(*shrunk, *identity);
+
+  created = SharedMemoryObject{};  // the creator unlinks it
+  EXPECT_TRUE(opened->unlinked());
+  EXPECT_EQ(SharedMemoryObject::identify(name).status().code(), StatusCode::kNotFound);
+  EXPECT_EQ(SharedMemoryObject::identify("/elsewhere").status().code(), StatusCode::kInvalidArgument);
+}
+
 TEST(SharedMemoryObject, TheCreatorUnlinksItOnDestruction) {
   std::string name;
   {
