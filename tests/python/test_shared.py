@@ -85,6 +85,22 @@ def test_shared_cast_rays_equals_trace_and_the_bytes_path_bitwise(server, store,
     assert result["primitive_uvs"].shape == (N, 2) and result["primitive_normals"].shape == (N, 3)
 
 
+def test_copies_in_parts_give_the_same_answers(server, store, bounds, tmp_path, monkeypatch):
+    """Large batches' copies into and out of the segment run in parts on a
+    thread pool; forced here on a small batch (and an odd byte count)."""
+    monkeypatch.setattr(_shared, "_PARALLEL_COPY_BYTES", 4096)
+    rays = make_rays(bounds, N + 3, seed=120, columns=6)
+    with outcore.SceneClient(server.address, timeout=60) as client:
+        result = client.cast_rays(rays)
+        assert client.last_call_shared
+    assert_equals_trace_bitwise(result, trace(store, rays, tmp_path))
+    for size in (4096, 4097, 1_000_003):
+        src = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
+        dst = np.zeros(size, dtype=np.uint8)
+        _shared.parallel_copy(dst, src)
+        assert np.array_equal(dst, src), size
+
+
 @pytest.mark.parametrize("columns", [6, 8])
 def test_shared_occlusions_equal_trace_and_the_bytes_path(server, store, bounds, tmp_path, columns):
     rays = make_rays(bounds, N, seed=110 + columns, columns=columns)
