@@ -15,10 +15,6 @@ namespace {
 constexpr double kSegmentWiden = 0x1p-8;
 // ... and by the rounding bound E = proxy_rounding_bound(scale, |origin|, |brick|).
 
-double max_abs(const Vec3d& v) {
-  return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)});
-}
-
 // True when an occupied voxel lies on the index-space segment [t0, t1] of
 // `ray`, which runs inside one 8^3 block (up to rounding: coordinates that
 // round into a neighbouring block are looked up there).

@@ -11,10 +11,6 @@ namespace outcore {
 
 namespace {
 
-double max_abs(const Vec3d& v) {
-  return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)});
-}
-
 // One separating axis: do the triangle's projections [min p, max p] and the
 // box's [-r, r] overlap?
 bool overlaps_on_axis(const Vec3d& axis, const Vec3d& v0, const Vec3d& v1, const Vec3d& v2,

@@ -21,10 +21,6 @@
 namespace outcore {
 namespace {
 
-double max_abs(const Vec3d& v) {
-  return std::max({std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)});
-}
-
 // Euclidean distance (an upper bound of the max-norm one E bounds) between
 // the exact line o + t d and a triangle, in float64. Differences of floats are
 // exact in float64 at these magnitudes; the cross products keep the result

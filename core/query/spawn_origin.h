@@ -49,11 +49,8 @@ inline Vec3f spawn_origin(const Ray& ray, const Hit& hit, SpawnSide side) {
   const Vec3d o(ray.origin), d(ray.direction), n(hit.normal);
   const double t = hit.t;
   const Vec3d p = o + d * t;
-  const auto inf_norm = [](const Vec3d& a) {
-    return std::max({std::fabs(a.x), std::fabs(a.y), std::fabs(a.z)});
-  };
   const double delta =
-      kSpawnRelativeOffset * (inf_norm(o) + inf_norm(p) + t * inf_norm(d)) + kSpawnAbsoluteOffset;
+      kSpawnRelativeOffset * (max_abs(o) + max_abs(p) + t * max_abs(d)) + kSpawnAbsoluteOffset;
   // Front: against the incoming direction, i.e. the normal's side when the ray
   // hit the front face (d . n < 0).
   const bool front_is_along_normal = dot(d, n) < 0.0;
