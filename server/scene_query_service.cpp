@@ -503,6 +503,7 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
     response->set_subtree_dir(tier->options().directory);
     response->set_subtree_loads(t.loads);
     response->set_subtree_loads_checked(t.loads_checked);
+    response->set_subtree_loads_kept(t.loads_kept);
     response->set_subtree_writes(t.writes);
     response->set_subtree_rejects(t.rejected());
     response->set_subtree_bytes_read(t.bytes_read);

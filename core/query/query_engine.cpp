@@ -1237,6 +1237,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const SubtreeTierCounters& tier_after = counters_after.subtree;
   stats.subtree_loads = tier_after.loads - tier_before.loads;
   stats.subtree_loads_checked = tier_after.loads_checked - tier_before.loads_checked;
+  stats.subtree_loads_kept = tier_after.loads_kept - tier_before.loads_kept;
   stats.subtree_writes = tier_after.writes - tier_before.writes;
   stats.subtree_rejects = tier_after.rejected() - tier_before.rejected();
   stats.subtree_bytes_read = tier_after.bytes_read - tier_before.bytes_read;
@@ -1269,6 +1270,7 @@ std::string QueryStats::to_json() const {
       .field("cache_misses", cache_misses);
   j.field("brick_builds", brick_builds).field("evictions", evictions);
   j.field("subtree_loads", subtree_loads).field("subtree_loads_checked", subtree_loads_checked);
+  j.field("subtree_loads_kept", subtree_loads_kept);
   j.field("subtree_writes", subtree_writes);
   j.field("subtree_rejects", subtree_rejects).field("subtree_bytes_read", subtree_bytes_read);
   j.field("subtree_bytes_written", subtree_bytes_written);
@@ -1325,10 +1327,11 @@ std::string QueryStats::to_text() const {
   if (subtree_loads + subtree_writes + subtree_rejects > 0) {
     std::snprintf(
         buf, sizeof buf,
-        "  subtree tier: %llu loads (%llu checked in full; %.1f MiB, %.3f s), %llu writes (%.1f MiB), "
-        "%llu rejected; builds %.3f s\n",
+        "  subtree tier: %llu loads (%llu checked in full, %llu on kept mappings; %.1f MiB, %.3f s), %llu "
+        "writes (%.1f MiB), %llu rejected; builds %.3f s\n",
         static_cast<unsigned long long>(subtree_loads),
-        static_cast<unsigned long long>(subtree_loads_checked), subtree_bytes_read / 1048576.0,
+        static_cast<unsigned long long>(subtree_loads_checked),
+        static_cast<unsigned long long>(subtree_loads_kept), subtree_bytes_read / 1048576.0,
         seconds_subtree_loads, static_cast<unsigned long long>(subtree_writes),
         subtree_bytes_written / 1048576.0, static_cast<unsigned long long>(subtree_rejects),
         seconds_brick_builds);

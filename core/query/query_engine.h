@@ -126,6 +126,7 @@ struct QueryStats {
   // files refused (corrupt, other version, stale; each then built).
   uint64_t subtree_loads = 0;
   uint64_t subtree_loads_checked = 0;  // of the loads, those that checked the file in full (first loads)
+  uint64_t subtree_loads_kept = 0;     // of the loads, those that reused a kept mapping (no open or mmap)
   uint64_t subtree_writes = 0;
   uint64_t subtree_rejects = 0;
   uint64_t subtree_bytes_read = 0;
@@ -198,7 +199,7 @@ class QueryEngine {
   ProxyOpenReport proxy_report_;
   bool cache_fits_scene_;
   uint64_t bricks_budget_holds_;  // the budget over the average brick reservation
-  bool embree_bricks_ = false;  // the bricks are EmbreeBrickAccels
+  bool embree_bricks_ = false;    // the bricks are EmbreeBrickAccels
   BrickAccelOptions accel_options_;
   std::unique_ptr<const UpperWalks> upper_walks_;
   std::mutex scratch_mutex_;  // taken twice per batch, never per ray

@@ -38,5 +38,6 @@
   X(seconds_brick_builds)           \
   X(seconds_subtree_loads)          \
   X(rays_in_brick_set)              \
-  X(subtree_loads_checked)
+  X(subtree_loads_checked)          \
+  X(subtree_loads_kept)
 // clang-format on
