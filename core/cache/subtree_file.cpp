@@ -17,6 +17,22 @@
 namespace outcore {
 namespace {
 
+// The accel's hold on a mapped subtree file. When someone else keeps the
+// mapping too (the tier, to load the brick again without mapping it again),
+// dropping the lease releases the pages the accel read (MappedFile::
+// release_pages), so an evicted brick holds no RSS; otherwise dropping the
+// last holder unmaps the file.
+struct SubtreeMappingLease {
+  explicit SubtreeMappingLease(std::shared_ptr<const MappedFile> mapped) : file(std::move(mapped)) {}
+  ~SubtreeMappingLease() {
+    if (file.use_count() > 1) file->release_pages();
+  }
+  SubtreeMappingLease(const SubtreeMappingLease&) = delete;
+  SubtreeMappingLease& operator=(const SubtreeMappingLease&) = delete;
+
+  std::shared_ptr<const MappedFile> file;
+};
+
 constexpr std::size_t kPreambleBytes = sizeof(kSubtreeMagic) + sizeof(uint32_t);
 constexpr std::size_t kTrailerBytes = sizeof(uint64_t);
 

@@ -72,22 +72,6 @@ enum class SubtreeRejection : uint8_t {
 };
 const char* subtree_rejection_name(SubtreeRejection rejection);
 
-// The accel's hold on a mapped subtree file. When someone else keeps the
-// mapping too (the tier, to load the brick again without mapping it again),
-// dropping the lease releases the pages the accel read (MappedFile::
-// release_pages), so an evicted brick holds no RSS; otherwise dropping the
-// last holder unmaps the file.
-struct SubtreeMappingLease {
-  explicit SubtreeMappingLease(std::shared_ptr<const MappedFile> mapped) : file(std::move(mapped)) {}
-  ~SubtreeMappingLease() {
-    if (file.use_count() > 1) file->release_pages();
-  }
-  SubtreeMappingLease(const SubtreeMappingLease&) = delete;
-  SubtreeMappingLease& operator=(const SubtreeMappingLease&) = delete;
-
-  std::shared_ptr<const MappedFile> file;
-};
-
 struct SubtreeReadResult {
   std::unique_ptr<BrickAccel> accel;  // set when rejection == kNone
   // When loaded: the mapping and the payload's bytes in it, for

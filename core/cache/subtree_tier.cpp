@@ -105,13 +105,12 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
   }
   // The kept mapping serves while the path still names the file it maps,
   // unchanged (an edited, replaced or deleted file goes the full way).
-  if (kept != nullptr && trusted.has_value() && kept->identity() == *trusted) {
+  const auto kept_still_valid = [&] {
+    if (kept == nullptr || !trusted.has_value() || !(kept->identity() == *trusted)) return false;
     const Expected<FileIdentity> now = file_identity(path);
-    if (!now.ok() || !(*now == *trusted)) kept = nullptr;
-  } else {
-    kept = nullptr;
-  }
-  if (kept != nullptr) {
+    return now.ok() && *now == *trusted;
+  };
+  if (kept_still_valid()) {
     std::unique_ptr<BrickAccel> accel = load_subtree_payload(kept, kept_payload, key, serializer_);
     if (accel != nullptr) {
       const double seconds = seconds_since(start);
