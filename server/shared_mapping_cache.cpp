@@ -10,11 +10,12 @@ Expected<std::shared_ptr<SharedMemoryObject>> SharedMappingCache::open(const std
   OUTCORE_ASSIGN_OR_RETURN(const SharedObjectIdentity identity, SharedMemoryObject::identify(name));
   // Dropped mappings are unmapped after the lock is released (declared first).
   std::vector<std::shared_ptr<SharedMemoryObject>> dropped;
-  // Under the lock: drops the mappings no name refers to any more and those
-  // `matches` says to, keeping their objects in `dropped`.
-  const auto drop_if = [&](auto&& matches) {
+  // Under the lock: drops the mappings no name refers to any more and, when
+  // `stale_name` is given, those of that name, keeping their objects in
+  // `dropped`.
+  const auto drop_locked = [&](const std::string* stale_name) {
     for (auto it = entries_.begin(); it != entries_.end();) {
-      if (matches(*it->object) || it->object->unlinked()) {
+      if ((stale_name != nullptr && it->object->name() == *stale_name) || it->object->unlinked()) {
         dropped.push_back(std::move(it->object));
         it = entries_.erase(it);
       } else {
@@ -24,7 +25,7 @@ Expected<std::shared_ptr<SharedMemoryObject>> SharedMappingCache::open(const std
   };
   {
     std::lock_guard lock(mutex_);
-    drop_if([](const SharedMemoryObject&) { return false; });
+    drop_locked(nullptr);
     for (Entry& entry : entries_) {
       const SharedMemoryObject& kept = *entry.object;
       if (kept.name() == name && kept.identity() == identity &&
@@ -42,7 +43,7 @@ Expected<std::shared_ptr<SharedMemoryObject>> SharedMappingCache::open(const std
   ++mapped_;
   if (max_objects_ == 0) return object;
   // Whatever this name mapped before is stale or too small.
-  drop_if([&](const SharedMemoryObject& kept) { return kept.name() == name; });
+  drop_locked(&name);
   if (entries_.size() >= max_objects_) {
     const auto oldest =
         std::min_element(entries_.begin(), entries_.end(),

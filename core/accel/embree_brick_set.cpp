@@ -19,13 +19,12 @@ Expected<std::unique_ptr<EmbreeBrickSet>> EmbreeBrickSet::build(
   OUTCORE_ASSIGN_OR_RETURN(EmbreeDevice * device, EmbreeDevice::instance());
   std::unique_ptr<EmbreeBrickSet> set(new EmbreeBrickSet());
   set->bricks_.assign(bricks.begin(), bricks.end());
-  const auto with_scene = static_cast<uint64_t>(std::count_if(
-      bricks.begin(), bricks.end(), [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; }));
+  const auto has_scene = [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; };
+  const auto with_scene = static_cast<uint64_t>(std::count_if(bricks.begin(), bricks.end(), has_scene));
   if (with_scene == 0) return set;
   if (with_scene == 1) {
     // One brick to trace: its own scene, without a level of instancing.
-    const EmbreeBrickAccel* only = *std::find_if(
-        bricks.begin(), bricks.end(), [](const EmbreeBrickAccel* b) { return b->scene_ != nullptr; });
+    const EmbreeBrickAccel* only = *std::find_if(bricks.begin(), bricks.end(), has_scene);
     set->scene_ = only->scene_;
     set->owns_scene_ = false;
     set->max_extent_ = only->max_extent_;

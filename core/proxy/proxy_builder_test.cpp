@@ -56,6 +56,22 @@ std::array<int32_t, 3> voxel_of(const ProxyFrame& f, const Vec3d& p) {
           static_cast<int32_t>(std::floor(q.z))};
 }
 
+// Rays tried against a proxy: those the float64 reference hits among a
+// brick's triangles, and those the proxy skips. add() is false when the
+// proxy would skip a ray the reference hits (what no proxy may do).
+struct ProxyTally {
+  int hits = 0;
+  int skipped = 0;
+  bool add(const BrickProxy& proxy, const std::vector<Triangle>& tris, const Ray& r, double rounding_scale) {
+    bool hit = false;
+    for (const Triangle& t : tris) hit = hit || reference_triangle_hit(t, r).has_value();
+    const bool may = proxy.may_hit(r, r.tnear, r.tfar, rounding_scale);
+    hits += hit;
+    skipped += !may;
+    return may || !hit;
+  }
+};
+
 TEST(ProxyBuilder, TriangleBoxOverlapNeverMissesASampledContact) {
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<double> u(0.0, 1.0);
@@ -201,7 +217,7 @@ TEST(ProxyBuilder, MayHitIsTrueForEveryRayTheFloat64ReferenceHits) {
   const BrickProxy proxy = build_brick_proxy(box, box, tris, ProxyBuildConfig{});
   const Aabb around{box.lo - box.extent(), box.hi + box.extent()};
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  int hits = 0, skipped = 0;
+  ProxyTally tally;
   for (int i = 0; i < 20000; ++i) {
     Ray r;
     r.origin = random_point(rng, i % 2 ? around : box);
@@ -210,17 +226,11 @@ TEST(ProxyBuilder, MayHitIsTrueForEveryRayTheFloat64ReferenceHits) {
     if (r.direction == Vec3f(0, 0, 0)) continue;
     if (i % 3 == 0) r.tfar = u(rng);
     if (i % 7 == 0) r.tnear = 0.5f * u(rng);
-    bool hit = false;
-    for (const Triangle& t : tris) hit = hit || reference_triangle_hit(t, r).has_value();
-    const bool may = proxy.may_hit(r, r.tnear, r.tfar, kMollerTrumboreHitRounding);
-    if (hit) {
-      ++hits;
-      ASSERT_TRUE(may) << "ray " << i;
-    }
-    skipped += !may;
+    ASSERT_TRUE(tally.add(proxy, tris, r, kMollerTrumboreHitRounding))
+        << "ray " << i << " hits but is skipped";
   }
-  EXPECT_GT(hits, 1000);
-  EXPECT_GT(skipped, 2000);
+  EXPECT_GT(tally.hits, 1000);
+  EXPECT_GT(tally.skipped, 2000);
 }
 
 TEST(ProxyBuilder, TooSmallABrickForItsDistanceFromTheOriginIsNeverSkipped) {
@@ -252,7 +262,6 @@ TEST(ProxyBuilder, ResolutionIsRangeChecked) {
   EXPECT_NE(s.message().find("proxy resolution"), std::string::npos) << s.message();
 }
 
-}  // namespace
 TEST(ProxyBuilder, MarginsGrowWithTheScenesReachSoFarBricksStillSkip) {
   // A 3-unit brick 3900 units from the origin in an 8000-unit flat scene: a
   // quarter voxel (0.023) is below twice the watertight rounding bound of a
@@ -286,7 +295,7 @@ TEST(ProxyBuilder, MarginsGrowWithTheScenesReachSoFarBricksStillSkip) {
   // Never skipped when the reference hits, from anywhere in the reach.
   std::mt19937_64 rng(11);
   const Aabb around{{-12000, -4000, -12000}, {12000, 4000, 12000}};
-  int hits = 0, skipped = 0;
+  ProxyTally tally;
   for (int i = 0; i < 20000; ++i) {
     Ray r;
     r.origin = random_point(rng, around);
@@ -294,17 +303,11 @@ TEST(ProxyBuilder, MarginsGrowWithTheScenesReachSoFarBricksStillSkip) {
     const Vec3f target =
         i % 2 ? random_point(rng, box) : aim.v0 + (aim.v1 - aim.v0) * 0.3f + (aim.v2 - aim.v0) * 0.3f;
     r.direction = target - r.origin;
-    bool hit = false;
-    for (const Triangle& t : tris) hit = hit || reference_triangle_hit(t, r).has_value();
-    const bool may = proxy.may_hit(r, r.tnear, r.tfar, kWatertightHitRounding);
-    if (hit) {
-      ++hits;
-      ASSERT_TRUE(may) << "ray " << i;
-    }
-    skipped += !may;
+    ASSERT_TRUE(tally.add(proxy, tris, r, kWatertightHitRounding)) << "ray " << i << " hits but is skipped";
   }
-  EXPECT_GT(hits, 5000);
-  EXPECT_GT(skipped, 5000);
+  EXPECT_GT(tally.hits, 5000);
+  EXPECT_GT(tally.skipped, 5000);
 }
 
+}  // namespace
 }  // namespace outcore
