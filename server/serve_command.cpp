@@ -37,8 +37,7 @@ struct ServeArgs {
   uint64_t cache_mb = 1024;
   std::string policy = "lru";
   std::string brick_accel = "embree";
-  std::string subtree_dir;
-  uint64_t subtree_dir_mb = 0;  // 0: unbounded
+  SubtreeCliOptions subtree;
   bool no_proxies = false;
   std::optional<int64_t> proxy_res;  // unset: the default resolution
   int threads = 0;
@@ -122,7 +121,7 @@ int run_serve(const ServeArgs& args) {
   engine_options.cache_bytes = args.cache_mb << 20;
   engine_options.eviction_policy = args.policy;
   engine_options.brick_accel = args.brick_accel;
-  const Status subtree = apply_subtree_options(args.subtree_dir, args.subtree_dir_mb, engine_options);
+  const Status subtree = apply_subtree_options(args.subtree, engine_options);
   if (!subtree.ok()) return report_command_error("serve", subtree.message());
   auto engine = QueryEngine::open(args.scene, engine_options);
   if (!engine.ok()) return report_command_error("serve", engine.status().message());
@@ -208,7 +207,7 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
-  add_subtree_options(*cmd, args->subtree_dir, args->subtree_dir_mb);
+  add_subtree_options(*cmd, args->subtree);
   cmd->add_flag("--no-proxies", args->no_proxies, "Do not skip bricks by their occupancy proxies");
   cmd->add_option("--proxy-res", args->proxy_res,
                   "Proxy voxels along each brick's longest side (default 32)");

@@ -238,6 +238,10 @@ Status BrickCache::enable_subtree_tier(const SubtreeTierOptions& options) {
   return Status::Ok();
 }
 
+void BrickCache::release_evicted_pages() {
+  if (tier_) tier_->release_pending_pages();
+}
+
 SubtreeKey BrickCache::subtree_key(uint32_t brick_id) const {
   SubtreeKey key;
   key.brick_id = brick_id;

@@ -120,6 +120,9 @@ class BrickCache {
   Status enable_subtree_tier(const SubtreeTierOptions& options);
   // nullptr without a tier.
   const SubtreeTier* subtree_tier() const { return tier_.get(); }
+  // Releases the pages of evicted tier-loaded bricks still queued for release
+  // (SubtreeTier::release_pending_pages); nothing without a tier.
+  void release_evicted_pages();
 
   // Records every later acquisition into `trace` (nullptr stops recording).
   // Set it before the first acquire so the trace starts from an empty cache.

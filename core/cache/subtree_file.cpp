@@ -19,18 +19,26 @@ namespace {
 
 // The accel's hold on a mapped subtree file. When someone else keeps the
 // mapping too (the tier, to load the brick again without mapping it again),
-// dropping the lease releases the pages the accel read (MappedFile::
-// release_pages), so an evicted brick holds no RSS; otherwise dropping the
-// last holder unmaps the file.
+// dropping the lease releases the pages the accel read (through the tier's
+// PageReleaseQueue when it has one, else MappedFile::release_pages at once),
+// so an evicted brick holds no RSS; otherwise dropping the last holder
+// unmaps the file.
 struct SubtreeMappingLease {
-  explicit SubtreeMappingLease(std::shared_ptr<const MappedFile> mapped) : file(std::move(mapped)) {}
+  SubtreeMappingLease(std::shared_ptr<const MappedFile> mapped, std::shared_ptr<PageReleaseQueue> queue)
+      : file(std::move(mapped)), release_queue(std::move(queue)) {}
   ~SubtreeMappingLease() {
-    if (file.use_count() > 1) file->release_pages();
+    if (file.use_count() <= 1) return;
+    if (release_queue != nullptr) {
+      release_queue->release(std::move(file));
+    } else {
+      file->release_pages();
+    }
   }
   SubtreeMappingLease(const SubtreeMappingLease&) = delete;
   SubtreeMappingLease& operator=(const SubtreeMappingLease&) = delete;
 
   std::shared_ptr<const MappedFile> file;
+  std::shared_ptr<PageReleaseQueue> release_queue;
 };
 
 constexpr std::size_t kPreambleBytes = sizeof(kSubtreeMagic) + sizeof(uint32_t);
@@ -56,11 +64,13 @@ std::string describe(const SubtreeKey& key) {
 // The serialiser's load of `payload`, in place, the accel holding `file`
 // through a lease; never throws.
 Expected<std::unique_ptr<BrickAccel>> load_leased(std::shared_ptr<const MappedFile> file,
+                                                  std::shared_ptr<PageReleaseQueue> release_queue,
                                                   std::span<const char> payload, const SubtreeKey& key,
                                                   const BrickSerializer& serializer, bool known_good) {
   try {
-    const SerializedBrick serialized{payload, std::make_shared<const SubtreeMappingLease>(std::move(file)),
-                                     known_good};
+    const SerializedBrick serialized{
+        payload, std::make_shared<const SubtreeMappingLease>(std::move(file), std::move(release_queue)),
+        known_good};
     return serializer.load(serialized, key.brick_id, key.triangle_count);
   } catch (const std::bad_alloc&) {
     return resource_exhausted("out of memory while loading");
@@ -111,7 +121,8 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
 
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
                                     const BrickSerializer& serializer,
-                                    const std::optional<FileIdentity>& trusted) {
+                                    const std::optional<FileIdentity>& trusted,
+                                    std::shared_ptr<PageReleaseQueue> release_queue) {
   Expected<MappedFile> mapped = MappedFile::open(path);
   if (!mapped.ok()) {
     if (mapped.status().code() == StatusCode::kNotFound) return SubtreeReadResult{};
@@ -168,7 +179,7 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
   result.payload = bytes.subspan(payload_offset, checked - payload_offset);
   result.file = file;
   Expected<std::unique_ptr<BrickAccel>> loaded =
-      load_leased(std::move(file), result.payload, key, serializer, known_good);
+      load_leased(std::move(file), std::move(release_queue), result.payload, key, serializer, known_good);
   if (!loaded.ok()) return rejected(SubtreeRejection::kCorrupt, path, loaded.status().message());
   result.accel = std::move(loaded).value();
   result.rejection = SubtreeRejection::kNone;
@@ -177,8 +188,10 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
 
 std::unique_ptr<BrickAccel> load_subtree_payload(const std::shared_ptr<const MappedFile>& file,
                                                  std::span<const char> payload, const SubtreeKey& key,
-                                                 const BrickSerializer& serializer) {
-  Expected<std::unique_ptr<BrickAccel>> loaded = load_leased(file, payload, key, serializer, true);
+                                                 const BrickSerializer& serializer,
+                                                 std::shared_ptr<PageReleaseQueue> release_queue) {
+  Expected<std::unique_ptr<BrickAccel>> loaded =
+      load_leased(file, std::move(release_queue), payload, key, serializer, true);
   return loaded.ok() ? std::move(loaded).value() : nullptr;
 }
 

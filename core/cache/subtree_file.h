@@ -40,6 +40,7 @@
 
 #include "core/accel/brick_serializer.h"
 #include "core/util/mapped_file.h"
+#include "core/util/page_release_queue.h"
 #include "core/util/status.h"
 
 namespace outcore {
@@ -94,9 +95,13 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
 // file mapped and reads it in place. `trusted`: the identity of a file the
 // caller wrote or checked in full before; when the file at `path` still has
 // it, it is known good (see above) and only its header is checked.
+// `release_queue`: where the accel, once dropped while someone else still
+// holds the mapping, queues its pages for release (nullptr: released at
+// once).
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
                                     const BrickSerializer& serializer,
-                                    const std::optional<FileIdentity>& trusted = std::nullopt);
+                                    const std::optional<FileIdentity>& trusted = std::nullopt,
+                                    std::shared_ptr<PageReleaseQueue> release_queue = nullptr);
 
 // Loads again, in place and without checks, a payload read_subtree_file()
 // loaded from `file` before (the file's bytes cannot have changed under the
@@ -104,6 +109,7 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
 // serialiser refuses it (it never should).
 std::unique_ptr<BrickAccel> load_subtree_payload(const std::shared_ptr<const MappedFile>& file,
                                                  std::span<const char> payload, const SubtreeKey& key,
-                                                 const BrickSerializer& serializer);
+                                                 const BrickSerializer& serializer,
+                                                 std::shared_ptr<PageReleaseQueue> release_queue = nullptr);
 
 }  // namespace outcore

@@ -22,6 +22,9 @@ using Clock = std::chrono::steady_clock;
 
 constexpr std::string_view kPrefix = "brick-";
 constexpr std::string_view kSuffix = ".subtree";
+// Mappings per release batch at most (small bricks: the byte bound would
+// queue thousands, each a range the kernel walks in one call).
+constexpr std::size_t kMaxReleaseBatchMappings = 64;
 
 std::string hex64(uint64_t value) {
   char text[17];
@@ -44,7 +47,11 @@ SubtreeTier::SubtreeTier(const SubtreeTierOptions& options, const BrickSerialize
     : options_(options),
       serializer_(serializer),
       structure_hash_(
-          hex64(checksum64(serializer.structure_key().data(), serializer.structure_key().size()))) {}
+          hex64(checksum64(serializer.structure_key().data(), serializer.structure_key().size()))),
+      release_queue_(
+          options.release_batch_bytes == 0
+              ? nullptr
+              : std::make_shared<PageReleaseQueue>(options.release_batch_bytes, kMaxReleaseBatchMappings)) {}
 
 Expected<std::unique_ptr<SubtreeTier>> SubtreeTier::open(const SubtreeTierOptions& options,
                                                          const BrickSerializer& serializer) {
@@ -111,7 +118,10 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
     return now.ok() && *now == *trusted;
   };
   if (kept_still_valid()) {
-    std::unique_ptr<BrickAccel> accel = load_subtree_payload(kept, kept_payload, key, serializer_);
+    // Its pages may still be queued for release: keep them instead.
+    if (release_queue_ != nullptr) release_queue_->cancel(kept.get());
+    std::unique_ptr<BrickAccel> accel =
+        load_subtree_payload(kept, kept_payload, key, serializer_, release_queue_);
     if (accel != nullptr) {
       const double seconds = seconds_since(start);
       std::lock_guard lock(mutex_);
@@ -124,7 +134,7 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
       return accel;
     }
   }
-  SubtreeReadResult read = read_subtree_file(path, key, serializer_, trusted);
+  SubtreeReadResult read = read_subtree_file(path, key, serializer_, trusted, release_queue_);
   const double seconds = seconds_since(start);
 
   std::lock_guard lock(mutex_);
@@ -216,7 +226,7 @@ std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const Bric
   // The written file, mapped in place. Deleted meanwhile (a bound, another
   // process): nullptr, the caller keeps the built one; replaced by another
   // process since the rename (another identity): checked in full.
-  SubtreeReadResult read = read_subtree_file(path_of(key), key, serializer_, ours);
+  SubtreeReadResult read = read_subtree_file(path_of(key), key, serializer_, ours, release_queue_);
   if (read.accel != nullptr) {
     lock.lock();
     keep_mapping_locked(name, read);
@@ -255,6 +265,14 @@ void SubtreeTier::forget_locked(const std::string& name) {
   counters_.bytes -= it->second.bytes;
   if (it->second.mapping != nullptr) --kept_mappings_;
   files_.erase(it);
+}
+
+void SubtreeTier::release_pending_pages() {
+  if (release_queue_ != nullptr) release_queue_->flush();
+}
+
+PageReleaseCounters SubtreeTier::page_release_counters() const {
+  return release_queue_ != nullptr ? release_queue_->counters() : PageReleaseCounters{};
 }
 
 SubtreeTierCounters SubtreeTier::counters() const {

@@ -43,7 +43,10 @@
 //   (MappedFile::release_pages: they leave the RSS, the page cache keeps
 //   them), and the next load of that brick reuses the mapping while the path
 //   still names that file unchanged (one stat): no open, no mmap, no header
-//   check. Mapping and unmapping take the process's mapping
+//   check. Released pages are batched (PageReleaseQueue, release_batch_bytes
+//   of mappings at most, flushed at the end of each query batch), and a
+//   queued mapping loaded again is taken out of the queue with its pages.
+//   Mapping and unmapping take the process's mapping
 //   lock for writing, which stalls every other thread's page faults; a warm
 //   batch at a quarter budget loads thousands of bricks. A kept mapping is
 //   dropped when this tier deletes the file or forgets it, and not used when
@@ -68,9 +71,16 @@
 
 namespace outcore {
 
+// Evicted bricks' pages are released in batches of this many bytes of
+// mappings (PageReleaseQueue): one system call, and one TLB flush on recent
+// kernels, per batch instead of per brick. They stay in the RSS until then.
+inline constexpr uint64_t kDefaultReleaseBatchBytes = uint64_t{32} << 20;
+
 struct SubtreeTierOptions {
   std::string directory;   // created if missing
   uint64_t max_bytes = 0;  // 0: unbounded
+  // 0: each evicted brick's pages are released at once.
+  uint64_t release_batch_bytes = kDefaultReleaseBatchBytes;
 };
 
 struct SubtreeTierCounters {
@@ -117,6 +127,11 @@ class SubtreeTier {
   // tier is a cache.
   std::unique_ptr<BrickAccel> store(const SubtreeKey& key, const BrickAccel& accel);
 
+  // Releases the pages of evicted bricks still queued for release (the end
+  // of a batch: nothing held beyond the budget between batches).
+  void release_pending_pages();
+  PageReleaseCounters page_release_counters() const;
+
   // Where the file for `key` lives (tests, tools).
   std::string path_of(const SubtreeKey& key) const;
   SubtreeTierCounters counters() const;
@@ -147,6 +162,8 @@ class SubtreeTier {
   const SubtreeTierOptions options_;
   const BrickSerializer& serializer_;
   const std::string structure_hash_;  // of the structure key, for file names
+  // Where loaded bricks queue their pages when evicted (null: released at once).
+  const std::shared_ptr<PageReleaseQueue> release_queue_;
 
   mutable std::mutex mutex_;
   std::map<std::string, FileEntry> files_;  // by file name

@@ -3,24 +3,31 @@
 #include <CLI/CLI.hpp>
 
 #include <limits>
+#include <string>
+#include <utility>
 
 namespace outcore {
 
-void add_subtree_options(CLI::App& command, std::string& subtree_dir, uint64_t& subtree_dir_mb) {
-  command.add_option("--subtree-dir", subtree_dir,
+void add_subtree_options(CLI::App& command, SubtreeCliOptions& options) {
+  command.add_option("--subtree-dir", options.dir,
                      "Save built bricks to this directory and load them from it on later misses instead of "
                      "building (--brick-accel bvh only; docs/CACHE_TUNING.md)");
   command
-      .add_option("--subtree-dir-mb", subtree_dir_mb,
+      .add_option("--subtree-dir-mb", options.dir_mb,
                   "Most MiB of brick files kept in --subtree-dir, least recently used deleted first (0: "
                   "unbounded)")
       ->capture_default_str();
+  command
+      .add_option("--subtree-release-batch-mb", options.release_batch_mb,
+                  "Release the pages of evicted bricks loaded from --subtree-dir in batches of this many MiB "
+                  "of mappings (held in RSS until released; 0: each brick at once; docs/CACHE_TUNING.md)")
+      ->capture_default_str();
 }
 
-Status apply_subtree_options(const std::string& subtree_dir, uint64_t subtree_dir_mb,
-                             EngineOptions& options) {
-  if (subtree_dir.empty()) {
-    if (subtree_dir_mb != 0) return invalid_argument("--subtree-dir-mb needs --subtree-dir");
+Status apply_subtree_options(const SubtreeCliOptions& cli, EngineOptions& options) {
+  constexpr uint64_t kMaxMiB = std::numeric_limits<uint64_t>::max() >> 20;
+  if (cli.dir.empty()) {
+    if (cli.dir_mb != 0) return invalid_argument("--subtree-dir-mb needs --subtree-dir");
     return Status::Ok();
   }
   // Only bvh bricks can be serialised (BrickBuilder::serializer()).
@@ -28,13 +35,16 @@ Status apply_subtree_options(const std::string& subtree_dir, uint64_t subtree_di
     return invalid_argument("--subtree-dir needs --brick-accel bvh (got '" + options.brick_accel +
                             "', whose bricks cannot be saved)");
   }
-  if (subtree_dir_mb > (std::numeric_limits<uint64_t>::max() >> 20)) {
-    return invalid_argument("--subtree-dir-mb must be at most " +
-                            std::to_string(std::numeric_limits<uint64_t>::max() >> 20) + ", got " +
-                            std::to_string(subtree_dir_mb));
+  for (const auto& [name, mib] : {std::pair{"--subtree-dir-mb", cli.dir_mb},
+                                  std::pair{"--subtree-release-batch-mb", cli.release_batch_mb}}) {
+    if (mib > kMaxMiB) {
+      return invalid_argument(std::string(name) + " must be at most " + std::to_string(kMaxMiB) + ", got " +
+                              std::to_string(mib));
+    }
   }
-  options.subtree_dir = subtree_dir;
-  options.subtree_max_bytes = subtree_dir_mb << 20;
+  options.subtree_dir = cli.dir;
+  options.subtree_max_bytes = cli.dir_mb << 20;
+  options.subtree_release_batch_bytes = cli.release_batch_mb << 20;
   return Status::Ok();
 }
 

@@ -26,8 +26,7 @@ struct TraceArgs {
   uint64_t cache_mb = 1024;
   std::string policy = "lru";
   std::string brick_accel = "embree";
-  std::string subtree_dir;
-  uint64_t subtree_dir_mb = 0;  // 0: unbounded
+  SubtreeCliOptions subtree;
   std::vector<std::string> accel_options;
   std::string triangle_test;  // shorthand for --accel-opt triangle_test=NAME (bvh only)
   bool reference = false;     // float64 ground truth: brick structure "reference"
@@ -91,7 +90,7 @@ int run_trace(const TraceArgs& args) {
   engine_options.cache_bytes = args.cache_mb << 20;
   engine_options.eviction_policy = args.policy;
   engine_options.brick_accel = args.brick_accel;
-  const Status subtree = apply_subtree_options(args.subtree_dir, args.subtree_dir_mb, engine_options);
+  const Status subtree = apply_subtree_options(args.subtree, engine_options);
   if (!subtree.ok()) return report_command_error("trace", subtree.message());
   engine_options.accel_options = *accel_options;
   if (!args.triangle_test.empty()) {
@@ -205,7 +204,7 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
-  add_subtree_options(*cmd, args->subtree_dir, args->subtree_dir_mb);
+  add_subtree_options(*cmd, args->subtree);
   cmd->add_option("--accel-opt", args->accel_options, "Brick structure option key=value (repeatable)");
   cmd->add_option("--triangle-test", args->triangle_test,
                   "Triangle test of --brick-accel bvh: mt, watertight (default) or double");

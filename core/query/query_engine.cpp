@@ -256,7 +256,8 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
       std::make_unique<BrickCache>(store, std::move(builder), std::move(policy), options.cache_bytes);
   if (options.access_trace) cache->set_access_trace(options.access_trace);
   if (!options.subtree_dir.empty())
-    OUTCORE_RETURN_IF_ERROR(cache->enable_subtree_tier({options.subtree_dir, options.subtree_max_bytes}));
+    OUTCORE_RETURN_IF_ERROR(cache->enable_subtree_tier(
+        {options.subtree_dir, options.subtree_max_bytes, options.subtree_release_batch_bytes}));
   auto engine = std::unique_ptr<QueryEngine>(new QueryEngine(std::move(store), std::move(cache),
                                                              std::move(proxies), std::move(proxy_report),
                                                              cache_fits_scene, bricks_budget_holds));
@@ -1230,6 +1231,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     }
   }
 
+  // The batch's evicted bricks hold no pages past its end.
+  cache_->release_evicted_pages();
   const CacheCounters counters_after = cache_->counters();
   stats.brick_builds = counters_after.builds - counters_before.builds;
   stats.evictions = counters_after.evictions - counters_before.evictions;

@@ -65,9 +65,11 @@ struct EngineOptions {
   // When set, built bricks are saved to this directory and later misses load
   // them from it instead of building (core/cache/subtree_tier.h); only for
   // brick structures that can be serialised (bvh). subtree_max_bytes bounds
-  // the files kept there (0: unbounded).
+  // the files kept there (0: unbounded); subtree_release_batch_bytes batches
+  // the release of evicted bricks' pages (SubtreeTierOptions).
   std::string subtree_dir;
   uint64_t subtree_max_bytes = 0;
+  uint64_t subtree_release_batch_bytes = kDefaultReleaseBatchBytes;
 };
 
 struct QueryOptions {

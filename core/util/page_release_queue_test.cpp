@@ -1,0 +1,156 @@
+#include "core/util/page_release_queue.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/support/test_paths.h"
+
+namespace outcore {
+namespace {
+
+constexpr std::size_t kPage = 4096;
+
+// Pages of `file` present in this process's page tables (/proc/self/pagemap's
+// "present" bit, readable without privileges).
+std::size_t mapped_pages(const MappedFile& file) {
+  const int fd = ::open("/proc/self/pagemap", O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return SIZE_MAX;
+  const auto first = reinterpret_cast<uintptr_t>(file.bytes().data()) / kPage;
+  const std::size_t pages = (file.bytes().size() + kPage - 1) / kPage;
+  std::vector<uint64_t> entries(pages);
+  const ssize_t got = ::pread(fd, entries.data(), pages * sizeof(uint64_t), static_cast<off_t>(first * 8));
+  ::close(fd);
+  if (got != static_cast<ssize_t>(pages * sizeof(uint64_t))) return SIZE_MAX;
+  std::size_t present = 0;
+  for (const uint64_t e : entries) present += (e >> 63) & 1;
+  return present;
+}
+
+// Reads every page (maps them all) and returns the bytes' sum.
+uint64_t touch(const MappedFile& file) {
+  // Volatile: a caller that ignores the sum still maps the pages.
+  const volatile char* bytes = file.bytes().data();
+  uint64_t sum = 0;
+  for (std::size_t i = 0; i < file.bytes().size(); i += kPage) sum += static_cast<unsigned char>(bytes[i]);
+  return sum;
+}
+
+class PageReleaseQueueTest : public ::testing::Test {
+ protected:
+  std::shared_ptr<const MappedFile> make_file(int index, std::size_t pages) {
+    const std::string path = dir_.path() + "/f" + std::to_string(index);
+    std::string bytes(pages * kPage, '\0');
+    for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<char>(i * 13 + index);
+    testing::write_text_file(path, bytes);
+    auto mapped = MappedFile::open(path);
+    EXPECT_TRUE(mapped.ok()) << mapped.status().to_string();
+    return std::make_shared<const MappedFile>(std::move(mapped).value());
+  }
+
+  testing::TempDir dir_;
+};
+
+TEST_F(PageReleaseQueueTest, ReleasesABatchWhenFullAndKeepsTheBytes) {
+  PageReleaseQueue queue(/*max_pending_bytes=*/1 << 30, /*max_pending_mappings=*/3);
+  std::vector<std::shared_ptr<const MappedFile>> files;
+  std::vector<uint64_t> sums;
+  for (int i = 0; i < 3; ++i) {
+    files.push_back(make_file(i, 4));
+    sums.push_back(touch(*files.back()));
+    ASSERT_EQ(mapped_pages(*files.back()), 4u);
+  }
+  queue.release(files[0]);
+  queue.release(files[1]);
+  EXPECT_EQ(queue.pending_bytes(), 8 * kPage);
+  EXPECT_EQ(mapped_pages(*files[0]), 4u) << "queued pages stay mapped until the batch is released";
+  EXPECT_EQ(queue.counters().mappings_released, 0u);
+  queue.release(files[2]);  // the third fills the batch
+  EXPECT_EQ(queue.pending_bytes(), 0u);
+  const PageReleaseCounters c = queue.counters();
+  EXPECT_EQ(c.mappings_released, 3u);
+  EXPECT_EQ(c.batches + c.single_calls, c.batches == 1 ? 1u : 3u) << "one batched call, or one call each";
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(mapped_pages(*files[i]), 0u) << "file " << i << ": released pages leave the page tables";
+    EXPECT_EQ(touch(*files[i]), sums[i]) << "and read the same bytes again";
+  }
+}
+
+TEST_F(PageReleaseQueueTest, ByteBoundReleasesEarly) {
+  PageReleaseQueue queue(/*max_pending_bytes=*/6 * kPage, /*max_pending_mappings=*/64);
+  auto a = make_file(0, 4);
+  auto b = make_file(1, 4);
+  touch(*a);
+  touch(*b);
+  queue.release(a);
+  EXPECT_EQ(mapped_pages(*a), 4u);
+  queue.release(b);  // 8 pages queued > 6
+  EXPECT_EQ(mapped_pages(*a), 0u);
+  EXPECT_EQ(mapped_pages(*b), 0u);
+  EXPECT_EQ(queue.pending_bytes(), 0u);
+}
+
+TEST_F(PageReleaseQueueTest, CancelKeepsPagesAndFlushReleasesTheRest) {
+  PageReleaseQueue queue(1 << 30, 64);
+  auto a = make_file(0, 2);
+  auto b = make_file(1, 3);
+  touch(*a);
+  touch(*b);
+  queue.release(a);
+  queue.release(b);
+  EXPECT_TRUE(queue.cancel(a.get()));
+  EXPECT_FALSE(queue.cancel(a.get())) << "no longer queued";
+  EXPECT_EQ(queue.pending_bytes(), 3 * kPage);
+  queue.flush();
+  EXPECT_EQ(mapped_pages(*a), 2u) << "a cancelled mapping keeps its pages";
+  EXPECT_EQ(mapped_pages(*b), 0u);
+  const PageReleaseCounters c = queue.counters();
+  EXPECT_EQ(c.cancelled, 1u);
+  EXPECT_EQ(c.mappings_released, 1u);
+  EXPECT_EQ(c.single_calls, 1u) << "a batch of one is one madvise";
+}
+
+TEST_F(PageReleaseQueueTest, HoldsQueuedMappingsAliveAndReleasesThemOnDestruction) {
+  std::weak_ptr<const MappedFile> watched;
+  {
+    PageReleaseQueue queue(1 << 30, 64);
+    auto file = make_file(0, 2);
+    touch(*file);
+    watched = file;
+    queue.release(std::move(file));
+    queue.release(nullptr);  // ignored
+    EXPECT_FALSE(watched.expired()) << "never released while its range is queued: it could be reused";
+  }
+  EXPECT_TRUE(watched.expired());
+}
+
+TEST_F(PageReleaseQueueTest, ConcurrentReleasesAllHappen) {
+  PageReleaseQueue queue(1 << 30, 5);
+  constexpr int kThreads = 4;
+  constexpr int kPerThread = 12;
+  std::vector<std::shared_ptr<const MappedFile>> files;
+  for (int i = 0; i < kThreads * kPerThread; ++i) {
+    files.push_back(make_file(i, 1));
+    touch(*files.back());
+  }
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t) {
+    threads.emplace_back([&, t] {
+      for (int i = 0; i < kPerThread; ++i) queue.release(files[t * kPerThread + i]);
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  queue.flush();
+  EXPECT_EQ(queue.counters().mappings_released, static_cast<uint64_t>(kThreads * kPerThread));
+  for (const auto& file : files) EXPECT_EQ(mapped_pages(*file), 0u);
+}
+
+}  // namespace
+}  // namespace outcore
