@@ -19,12 +19,14 @@ the camera rays touch (written by the first quarter run if missing):
               bricks the camera touches)
   scene-quarter  --cache-mb SCENE_BUILT/4 (a quarter of the whole scene's
               built size, the budget of the incoherent rows), if given
+  quarter-unbatched  quarter with --subtree-release-batch-mb 0 (each evicted
+              brick's pages released at once), with --compare-unbatched
 A run's figure is the median of its warm batches (every batch after the
 first); a round's ratio is mapped / quarter; the table gives medians and
 ranges over rounds. Every hits file is compared bitwise with round 0's.
 
-Usage: camera_quarter_100m.py WORK_DIR [--rounds 6] [--repeat 5]
-       [--scene-built-mib 9017] [--outcore build/client/outcore]
+Usage: camera_quarter_100m.py WORK_DIR [--rounds 6] [--repeat 5] [--tier camera-tier]
+       [--scene-built-mib 9017] [--compare-unbatched] [--outcore build/client/outcore]
 WORK_DIR is subtree_tier_100m.py's (city4883.oc and camera.npy in it).
 """
 import argparse
@@ -54,6 +56,8 @@ def main():
     ap.add_argument("--tier", default="camera-tier", help="subtree directory inside WORK_DIR")
     ap.add_argument("--scene-built-mib", type=int, default=0,
                     help="also run at a quarter of this (the whole scene's built size)")
+    ap.add_argument("--compare-unbatched", action="store_true",
+                    help="also run the quarter budget with --subtree-release-batch-mb 0")
     ap.add_argument("--outcore", type=Path, default=ROOT / "build/client/outcore")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args()
@@ -80,6 +84,9 @@ def main():
         mapped = measured("camera-mapped", 65536, tier)
         quarter = measured("camera-quarter", quarter_mb, tier)
         quarter["ratio"] = mapped["warm"] / quarter["warm"]
+        if args.compare_unbatched:
+            unbatched = measured("camera-quarter-unbatched", quarter_mb, tier + ["--subtree-release-batch-mb", "0"])
+            unbatched["ratio"] = mapped["warm"] / unbatched["warm"]
         if args.scene_built_mib:
             scene = measured("camera-scene-quarter", args.scene_built_mib // 4, tier)
             scene["ratio"] = mapped["warm"] / scene["warm"]

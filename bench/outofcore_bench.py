@@ -11,11 +11,13 @@ Steps:
 4. for each budget fraction F and policy P: `outcore trace --cache-mb F*built
    --policy P --repeat 2 --trace-out`: builds, bytes built and seconds of each
    run (cold, then warm: steady state), peak accounted bytes and peak RSS
-   (wait4 of the process); the accounted peak must not exceed the budget;
+   (wait4 of the process), bytes built (its own access trace's misses); the
+   accounted peak must not exceed the budget;
 5. OPT: `outcore cache-sim` of the LRU trace at the same budget (Belady,
    size-aware) — the fewest builds any policy could have had on that request
    sequence; each policy's builds are reported against it;
-6. trace-ahead off (`--no-trace-ahead`) for LRU at each budget below 1;
+6. trace-ahead off (`--no-trace-ahead`) and proxies off (`--no-proxies`)
+   for LRU at each budget below 1;
 7. reorder off (`--no-reorder`) for LRU at each budget on a random subset of
    --noreorder-rays rays (rays one by one: far slower, so a subset).
 
@@ -28,7 +30,7 @@ is reported (there must be none).
 
 Usage: .venv/bin/python bench/outofcore_bench.py [--copies 400] [--rays 1000000]
        [--fractions 0.0625,0.125,0.25,0.5,1] [--policies all] [--kinds incoherent,camera]
-       [--no-compare-trace-ahead]
+       [--no-compare-trace-ahead] [--no-compare-proxies]
        [--outcore build/client/outcore] [--work build/bench-ooc] [--json rows.json]
 """
 import argparse
@@ -76,6 +78,19 @@ def trace(store, rays, out, cache_mb, policy, extra=(), trace_out=None):
     return stats, rss
 
 
+def bytes_built_mib(trace_path):
+    """MiB of bricks built (misses) in an access trace."""
+    total = 0
+    with open(trace_path) as f:
+        for line in f:
+            if line.startswith("#") or line.startswith("seq"):
+                continue
+            fields = line.rstrip("\n").split(",")
+            if fields[5] == "miss":
+                total += int(fields[2])
+    return total / 2**20
+
+
 def same_file(a, b):
     with open(a, "rb") as fa, open(b, "rb") as fb:
         return fa.read() == fb.read()
@@ -94,6 +109,7 @@ def main():
     ap.add_argument("--outcore", default=OUTCORE)
     ap.add_argument("--json")
     ap.add_argument("--no-compare-trace-ahead", action="store_true")
+    ap.add_argument("--no-compare-proxies", action="store_true")
     a = ap.parse_args()
     OUTCORE = os.path.abspath(a.outcore)
     policies = POLICIES if a.policies == "all" else a.policies.split(",")
@@ -135,13 +151,14 @@ def main():
             lru_trace = os.path.join(a.work, f"{kind}-{fraction}-lru.csv")
             for policy in policies:
                 out = os.path.join(a.work, f"{kind}-{fraction}-{policy}.npy")
-                stats, rss = trace(store, rays, out, budget_mib, policy,
-                                   trace_out=lru_trace if policy == "lru" else None)
+                run_trace = lru_trace if policy == "lru" else os.path.join(a.work, f"{kind}-{fraction}-{policy}.csv")
+                stats, rss = trace(store, rays, out, budget_mib, policy, trace_out=run_trace)
                 row = dict(kind=kind, fraction=fraction, policy=policy, budget_mib=budget_mib,
                            builds_cold=stats[0]["brick_builds"], builds_warm=stats[1]["brick_builds"],
                            seconds_cold=stats[0]["seconds"]["total"], seconds_warm=stats[1]["seconds"]["total"],
                            peak_accounted_mib=max(s["peak_bytes_resident"] for s in stats) / 2**20,
-                           peak_rss_mib=rss, same_answers=same_file(out, ref_out))
+                           peak_rss_mib=rss, same_answers=same_file(out, ref_out),
+                           bytes_built_mib=bytes_built_mib(run_trace))
                 rows.append(row)
                 print(json.dumps(row), flush=True)
             sim = json.loads(run([OUTCORE, "cache-sim", lru_trace, "--policy", "lru", "--budget-mb", str(budget_mib),
@@ -151,15 +168,22 @@ def main():
                              budget_mib=budget_mib, builds_total=opt["misses"],
                              bytes_built_mib=opt["bytes_built"] / 2**20))
             print(json.dumps(rows[-1]), flush=True)
+            comparisons = []
             if fraction < 1 and not a.no_compare_trace_ahead:
-                out = os.path.join(a.work, f"{kind}-{fraction}-noahead.npy")
-                stats, rss = trace(store, rays, out, budget_mib, "lru", extra=["--no-trace-ahead"])
-                rows.append(dict(kind=kind, fraction=fraction, policy="lru --no-trace-ahead", budget_mib=budget_mib,
+                comparisons.append(("noahead", "--no-trace-ahead"))
+            if fraction < 1 and not a.no_compare_proxies:
+                comparisons.append(("noproxies", "--no-proxies"))
+            for tag, flag in comparisons:
+                out = os.path.join(a.work, f"{kind}-{fraction}-{tag}.npy")
+                run_trace = os.path.join(a.work, f"{kind}-{fraction}-{tag}.csv")
+                stats, rss = trace(store, rays, out, budget_mib, "lru", extra=[flag], trace_out=run_trace)
+                rows.append(dict(kind=kind, fraction=fraction, policy=f"lru {flag}", budget_mib=budget_mib,
                                  builds_cold=stats[0]["brick_builds"], builds_warm=stats[1]["brick_builds"],
                                  seconds_cold=stats[0]["seconds"]["total"],
                                  seconds_warm=stats[1]["seconds"]["total"],
                                  peak_accounted_mib=max(s["peak_bytes_resident"] for s in stats) / 2**20,
-                                 peak_rss_mib=rss, same_answers=same_file(out, ref_out)))
+                                 peak_rss_mib=rss, same_answers=same_file(out, ref_out),
+                                 bytes_built_mib=bytes_built_mib(run_trace)))
                 print(json.dumps(rows[-1]), flush=True)
             out = os.path.join(a.work, f"{kind}-{fraction}-noreorder.npy")
             stats, rss = trace(store, subset, out, budget_mib, "lru", extra=["--no-reorder"])
@@ -171,9 +195,9 @@ def main():
             print(json.dumps(rows[-1]), flush=True)
     print(f"\nscene {spec}: {info['triangles']:,} triangles, {info['bricks']} bricks; load average "
           f"{load_before:.1f} before, {os.getloadavg()[0]:.1f} after, {os.cpu_count()} cores")
-    print("\n| rays | budget | policy | builds (cold + warm) | vs OPT | cold M rays/s | cold vs unlimited "
+    print("\n| rays | budget | policy | builds (cold + warm) | vs OPT | MiB built | cold M rays/s | cold vs unlimited "
           "| warm M rays/s | warm vs unlimited | peak accounted MiB | peak RSS MiB | answers = unlimited |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     by_key = {}
     for r in rows:
         by_key[(r["kind"], r["fraction"], r["policy"])] = r
@@ -191,12 +215,15 @@ def main():
         vs_cold = "" if "rays" in r else f"{unl['seconds_cold'] / r['seconds_cold']:.2f}x"
         vs = "" if "rays" in r else f"{unl['seconds_warm'] / r['seconds_warm']:.2f}x"
         budget = "unlimited" if frac == "unlimited" else f"{frac:g} ({r['budget_mib']} MiB)"
-        print(f"| {kind} | {budget} | {r['policy']} | {builds} | {vs_opt} | {cold:.2f} | {vs_cold} | {warm:.2f} | {vs} | "
+        built_mib = f"{r['bytes_built_mib']:.0f}" if "bytes_built_mib" in r else ""
+        print(f"| {kind} | {budget} | {r['policy']} | {builds} | {vs_opt} | {built_mib} | {cold:.2f} | {vs_cold} | "
+              f"{warm:.2f} | {vs} | "
               f"{r.get('peak_accounted_mib', float('nan')):.0f} | {r['peak_rss_mib']:.0f} | "
               f"{'yes' if r.get('same_answers', True) else 'NO'} |")
     for r in rows:
         if r["policy"].startswith("opt"):
-            print(f"OPT at {r['kind']} {r['fraction']:g} ({r['budget_mib']} MiB): {r['builds_total']} builds")
+            print(f"OPT at {r['kind']} {r['fraction']:g} ({r['budget_mib']} MiB): {r['builds_total']} builds, "
+                  f"{r['bytes_built_mib']:.0f} MiB built")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=1)

@@ -10,9 +10,7 @@
 
 #include <chrono>
 #include <cstdint>
-#include <fstream>
 #include <random>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -27,6 +25,7 @@ namespace outcore {
 namespace {
 
 using testing::json_uint;
+using testing::read_file_bytes;
 using testing::SubprocessResult;
 using testing::TempDir;
 
@@ -38,16 +37,10 @@ constexpr std::size_t kRandomRays = 40'000;
 // and its libraries + per-ray state of the batch + proxies + what the
 // allocator keeps of freed bricks under eviction churn + (with the tier) the
 // evicted bricks' pages queued for release.
-uint64_t rss_allowance(uint64_t budget_bytes, std::size_t rays, std::size_t bricks, bool tier) {
+[[maybe_unused]] uint64_t rss_allowance(uint64_t budget_bytes, std::size_t rays, std::size_t bricks,
+                                        bool tier) {
   return budget_bytes + 60 * kMiB + 160 * rays + 10 * 1024 * bricks + budget_bytes * 15 / 100 +
          (tier ? 32 * kMiB : 0);
-}
-
-std::string read_bytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return std::move(s).str();
 }
 
 // The JSON objects of a --stats-json array, one per batch.
@@ -119,7 +112,7 @@ class OutOfCoreCli : public ::testing::Test {
                                   "--stats-json", json};
     args.insert(args.end(), extra.begin(), extra.end());
     SubprocessResult r = outcore(args);
-    *stats = batches_of(read_bytes(json));
+    *stats = batches_of(read_file_bytes(json));
     return r;
   }
 
@@ -142,7 +135,8 @@ class OutOfCoreCli : public ::testing::Test {
     const SubprocessResult budgeted = trace(hits, budget_mb, 2, extra, &stats);
     ASSERT_TRUE(budgeted.succeeded()) << budgeted.describe();
     ASSERT_EQ(stats.size(), 2u);
-    EXPECT_EQ(read_bytes(hits), read_bytes(reference)) << "answers under a quarter budget = unlimited";
+    EXPECT_EQ(read_file_bytes(hits), read_file_bytes(reference))
+        << "answers under a quarter budget = unlimited";
     uint64_t evictions = 0;
     for (const std::string& batch : stats) {
       EXPECT_LE(json_uint(batch, "peak_bytes_resident"), budget_mb * kMiB) << batch;
