@@ -11,6 +11,8 @@ same store and rays:
               policy (batch 1 checks every file in full, later batches trust
               them): a server restarted on a warm directory; in the first
               round also at other fractions of the built size (--sweep)
+  unbatched   restarted lru with --subtree-release-batch-mb 0 (each evicted
+              brick's pages released at once), with --compare-unbatched
   no tier     the same budget without the tier (first round only: slow)
 A warm batch is any batch after the first; a run's figure is the median of
 its warm batches, a row's the median over rounds of (run / unlimited run of
@@ -20,7 +22,7 @@ also runs the camera rays (unlimited and restarted at a quarter of the
 camera's own built size). Heavy runs are ordered so that the tier's files
 stay in the page cache while tier runs are measured.
 
-Usage: subtree_tier_100m.py WORK_DIR [--rounds 3] [--repeat 5] [--no-camera]
+Usage: subtree_tier_100m.py WORK_DIR [--rounds 3] [--repeat 5] [--no-camera] [--compare-unbatched]
 The store (WORK_DIR/city4883.oc, `gen:city?of=(gen:sphere?level=5)&copies=4883`,
 4.1 GiB) and the 1 M-ray files are made on first use.
 """
@@ -76,6 +78,8 @@ def main():
     ap.add_argument("--outcore", type=Path, default=ROOT / "build/client/outcore")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--no-camera", action="store_true")
+    ap.add_argument("--compare-unbatched", action="store_true",
+                    help="also a restarted lru run with --subtree-release-batch-mb 0 in every round")
     ap.add_argument("--sweep", default="0.0625,0.125,0.5,1",
                     help="first round only: restarted lru runs at these fractions of the built size")
     args = ap.parse_args()
@@ -124,6 +128,11 @@ def main():
                             ["--subtree-dir", "tier", "--policy", policy], log)
             row["ratio"] = unl["warm"] / row["warm"]
             add(name, row, "unlimited")
+        if args.compare_unbatched:
+            row = run_trace(args.outcore, work, "incoherent.npy", "restarted-lru-unbatched", quarter, args.repeat,
+                            ["--subtree-dir", "tier", "--subtree-release-batch-mb", "0"], log)
+            row["ratio"] = unl["warm"] / row["warm"]
+            add("restarted-lru-unbatched", row, "unlimited")
         if first:
             for fraction in [float(f) for f in args.sweep.split(",") if f]:
                 name = f"restarted-lru-{fraction:g}"

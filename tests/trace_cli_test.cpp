@@ -730,6 +730,8 @@ TEST_F(TraceCli, SubtreeDirIsRejectedWithoutBvhNamingTheOption) {
   expect_trace_fails(trace(rays_path_, h, {"--reference", "--subtree-dir", tier}), h, {"--subtree-dir"});
   expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "bvh", "--subtree-dir-mb", "8"}), h,
                      {"--subtree-dir-mb needs --subtree-dir"});
+  expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "bvh", "--subtree-release-batch-mb", "0"}), h,
+                     {"--subtree-release-batch-mb needs --subtree-dir"});
   EXPECT_FALSE(fs::exists(tier)) << "nothing created on a rejected command line";
   const SubprocessResult serve = outcore({"serve", store_, "--listen", "127.0.0.1:0", "--subtree-dir", tier});
   EXPECT_FALSE(serve.succeeded());

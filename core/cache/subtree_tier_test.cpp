@@ -211,6 +211,11 @@ TEST_F(SubtreeTierTest, FilesAreCheckedInFullOnceThenTrustedUntilReplaced) {
     EXPECT_EQ(c.loads, bricks());
     EXPECT_EQ(c.loads_checked, 0u);
     EXPECT_EQ(c.loads_kept, bricks()) << "the written files stay mapped: reloads map nothing";
+    // Every evicted brick's pages went through the release queue.
+    writer->release_evicted_pages();
+    const PageReleaseCounters released = writer->subtree_tier()->page_release_counters();
+    EXPECT_GT(writer->counters().evictions, 0u);
+    EXPECT_EQ(released.mappings_released + released.cancelled, writer->counters().evictions);
   }
   auto reader = make_cache(budget, tier.path());
   acquire_all(*reader);

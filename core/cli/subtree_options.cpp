@@ -28,6 +28,9 @@ Status apply_subtree_options(const SubtreeCliOptions& cli, EngineOptions& option
   constexpr uint64_t kMaxMiB = std::numeric_limits<uint64_t>::max() >> 20;
   if (cli.dir.empty()) {
     if (cli.dir_mb != 0) return invalid_argument("--subtree-dir-mb needs --subtree-dir");
+    if (cli.release_batch_mb != (kDefaultReleaseBatchBytes >> 20)) {
+      return invalid_argument("--subtree-release-batch-mb needs --subtree-dir");
+    }
     return Status::Ok();
   }
   // Only bvh bricks can be serialised (BrickBuilder::serializer()).
