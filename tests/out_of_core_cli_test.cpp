@@ -39,7 +39,7 @@ constexpr std::size_t kRandomRays = 40'000;
 // evicted bricks' pages queued for release.
 [[maybe_unused]] uint64_t rss_allowance(uint64_t budget_bytes, std::size_t rays, std::size_t bricks,
                                         bool tier) {
-  return budget_bytes + 60 * kMiB + 160 * rays + 10 * 1024 * bricks + budget_bytes * 15 / 100 +
+  return budget_bytes + 60 * kMiB + 160 * rays + 10 * 1024 * bricks + budget_bytes * 25 / 100 +
          (tier ? 32 * kMiB : 0);
 }
 
