@@ -24,6 +24,7 @@
 namespace outcore {
 namespace {
 
+using testing::count_of;
 using testing::json_uint;
 using testing::read_file_bytes;
 using testing::SubprocessResult;
@@ -41,18 +42,6 @@ constexpr std::size_t kRandomRays = 40'000;
                                         bool tier) {
   return budget_bytes + 60 * kMiB + 160 * rays + 10 * 1024 * bricks + budget_bytes * 25 / 100 +
          (tier ? 32 * kMiB : 0);
-}
-
-// The JSON objects of a --stats-json array, one per batch.
-std::vector<std::string> batches_of(const std::string& json) {
-  std::vector<std::string> objects;
-  int depth = 0;
-  std::size_t start = 0;
-  for (std::size_t i = 0; i < json.size(); ++i) {
-    if (json[i] == '{' && depth++ == 0) start = i;
-    if (json[i] == '}' && --depth == 0) objects.push_back(json.substr(start, i - start + 1));
-  }
-  return objects;
 }
 
 class OutOfCoreCli : public ::testing::Test {
@@ -102,9 +91,10 @@ class OutOfCoreCli : public ::testing::Test {
   }
 
   // Traces the suite's rays at `cache_mb` with `extra` options, `repeat`
-  // batches; returns the run and fills the per-batch stats.
+  // batches; returns the run and sets *stats to its --stats-json (one object
+  // per batch: json_uint(*stats, key, batch)).
   SubprocessResult trace(const std::string& out, uint64_t cache_mb, int repeat,
-                         std::vector<std::string> extra, std::vector<std::string>* stats) {
+                         std::vector<std::string> extra, std::string* stats) {
     const std::string json = out + ".json";
     std::vector<std::string> args{"trace",        store_, "--rays",     rays_path_,
                                   "-o",           out,    "--cache-mb", std::to_string(cache_mb),
@@ -112,39 +102,39 @@ class OutOfCoreCli : public ::testing::Test {
                                   "--stats-json", json};
     args.insert(args.end(), extra.begin(), extra.end());
     SubprocessResult r = outcore(args);
-    *stats = batches_of(read_file_bytes(json));
+    *stats = read_file_bytes(json);
     return r;
   }
 
   void expect_bounded(std::vector<std::string> accel, bool tier) {
     TempDir out;
-    std::vector<std::string> unlimited_stats;
+    std::string unlimited_stats;
     const std::string reference = out.file("unlimited.npy");
     const SubprocessResult unlimited = trace(reference, 65536, 1, accel, &unlimited_stats);
     ASSERT_TRUE(unlimited.succeeded()) << unlimited.describe();
-    ASSERT_EQ(unlimited_stats.size(), 1u);
-    ASSERT_EQ(json_uint(unlimited_stats[0], "brick_builds"), brick_count_) << "the rays touch every brick";
-    const uint64_t built = json_uint(unlimited_stats[0], "peak_bytes_resident");
+    ASSERT_EQ(count_of(unlimited_stats, "\"brick_builds\""), 1u) << unlimited_stats;
+    ASSERT_EQ(json_uint(unlimited_stats, "brick_builds"), brick_count_) << "the rays touch every brick";
+    const uint64_t built = json_uint(unlimited_stats, "peak_bytes_resident");
 
     const uint64_t budget_mb = built / 4 / kMiB;
     ASSERT_GE(budget_mb, 16u) << "the scene is too small for the test";
     std::vector<std::string> extra = accel;
     if (tier) extra.insert(extra.end(), {"--subtree-dir", out.file("tier")});
-    std::vector<std::string> stats;
+    std::string stats;
     const std::string hits = out.file("budget.npy");
     const SubprocessResult budgeted = trace(hits, budget_mb, 2, extra, &stats);
     ASSERT_TRUE(budgeted.succeeded()) << budgeted.describe();
-    ASSERT_EQ(stats.size(), 2u);
+    ASSERT_EQ(count_of(stats, "\"brick_builds\""), 2u) << stats;
     EXPECT_EQ(read_file_bytes(hits), read_file_bytes(reference))
         << "answers under a quarter budget = unlimited";
     uint64_t evictions = 0;
-    for (const std::string& batch : stats) {
-      EXPECT_LE(json_uint(batch, "peak_bytes_resident"), budget_mb * kMiB) << batch;
-      evictions += json_uint(batch, "evictions");
+    for (int batch = 0; batch < 2; ++batch) {
+      EXPECT_LE(json_uint(stats, "peak_bytes_resident", batch), budget_mb * kMiB) << "batch " << batch;
+      evictions += json_uint(stats, "evictions", batch);
     }
     EXPECT_GT(evictions, brick_count_) << "the scene is several times the budget";
     if (tier) {
-      EXPECT_GT(json_uint(stats[1], "subtree_loads"), 0u) << stats[1];
+      EXPECT_GT(json_uint(stats, "subtree_loads", 1), 0u) << stats;
     }
 #ifndef OUTCORE_SANITIZE_BUILD  // sanitizer shadow memory and quarantine dwarf the bound
     const uint64_t allowance = rss_allowance(budget_mb * kMiB, ray_count_, brick_count_, tier);

@@ -35,6 +35,7 @@ namespace {
 
 namespace fs = std::filesystem;
 using testing::contains;
+using testing::count_of;
 using testing::json_uint;
 using testing::outcore_binary;
 using testing::run_subprocess;
@@ -165,12 +166,6 @@ class JsonChecker {
 
 bool valid_json(const std::string& text) {
   return JsonChecker(text).valid();
-}
-
-std::size_t count_of(const std::string& text, const std::string& part) {
-  std::size_t n = 0;
-  for (auto pos = text.find(part); pos != std::string::npos; pos = text.find(part, pos + 1)) ++n;
-  return n;
 }
 
 // ---- the shared scene, rays and in-process answers ---------------------------------

@@ -38,9 +38,7 @@ void PageReleaseQueue::release(std::shared_ptr<const MappedFile> file) {
     pending_bytes_ += file->bytes().size();
     pending_.push_back(std::move(file));
     if (pending_bytes_ < max_pending_bytes_ && pending_.size() < max_pending_mappings_) return;
-    batch.swap(pending_);
-    pending_.reserve(max_pending_mappings_);
-    pending_bytes_ = 0;
+    batch = take_pending_locked();
   }
   release_now(batch);
 }
@@ -61,10 +59,17 @@ void PageReleaseQueue::flush() {
   {
     std::lock_guard lock(mutex_);
     if (pending_.empty()) return;
-    batch.swap(pending_);
-    pending_bytes_ = 0;
+    batch = take_pending_locked();
   }
   release_now(batch);
+}
+
+std::vector<std::shared_ptr<const MappedFile>> PageReleaseQueue::take_pending_locked() {
+  std::vector<std::shared_ptr<const MappedFile>> batch;
+  batch.swap(pending_);
+  pending_.reserve(max_pending_mappings_);
+  pending_bytes_ = 0;
+  return batch;
 }
 
 void PageReleaseQueue::release_now(std::vector<std::shared_ptr<const MappedFile>>& batch) {

@@ -60,6 +60,8 @@ class PageReleaseQueue {
   PageReleaseCounters counters() const;
 
  private:
+  // Under the lock: the queued mappings, leaving the queue empty.
+  std::vector<std::shared_ptr<const MappedFile>> take_pending_locked();
   void release_now(std::vector<std::shared_ptr<const MappedFile>>& batch);
 
   const uint64_t max_pending_bytes_;
