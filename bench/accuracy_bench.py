@@ -34,7 +34,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from common import HIT_DTYPE, OUTCORE, ROOT, open3d_scene, open3d_timed_cast, read_store_triangles, run  # noqa: E402,F401
 
-MODELS = os.path.join(ROOT, "..", "shared", "models")
+MODELS = os.path.join(ROOT, "tests", "data", "models")
 CONFIGS = {
     "embree": [],
     "embree-robust": ["--accel-opt", "robust=1"],

@@ -29,7 +29,7 @@ from common import (OUTCORE, ROOT, make_rays, open3d_scene, open3d_timed_cast,  
                     prepare_store, read_store_triangles, run)
 
 SCENES = {
-    "bunny": [os.path.join(ROOT, "..", "shared", "models", "stanford-bunny.obj")],
+    "bunny": [os.path.join(ROOT, "tests", "data", "models", "stanford-bunny.obj")],
     "city": ["gen:city?of=(gen:sphere?level=5)&copies=732"],  # 14.99 M triangles
 }
 CACHE_MB = 8192

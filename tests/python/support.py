@@ -2,8 +2,8 @@
 binary (pack, serve, trace as the reference) and test rays.
 
 The binary is $OUTCORE_BINARY (default build/client/outcore; relative paths
-are taken from the repository root); models come from ../shared/models beside
-the repository ($OUTCORE_MODELS_DIR overrides).
+are taken from the repository root); models come from the repository's own
+tests/data/models ($OUTCORE_MODELS_DIR overrides).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def binary() -> Path:
 
 
 def models_dir() -> Path:
-    return Path(os.environ.get("OUTCORE_MODELS_DIR", REPO.parent / "shared" / "models"))
+    return Path(os.environ.get("OUTCORE_MODELS_DIR", REPO / "tests" / "data" / "models"))
 
 
 def run_outcore(*args, timeout=120) -> subprocess.CompletedProcess:

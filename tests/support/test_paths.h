@@ -1,4 +1,4 @@
-// Paths the tests need: the shared models folder and the built `outcore` binary.
+// Paths the tests need: the repository's test models (tests/data/models) and the built `outcore` binary.
 //
 // Thread-safety: pure functions.
 #pragma once
