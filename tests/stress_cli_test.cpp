@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstring>
+#include <filesystem>
 #include <random>
 #include <string>
 #include <vector>
@@ -130,8 +131,9 @@ TEST_F(AccuracyCli, TriangleTestAndReferenceOptionsAreChecked) {
 }
 
 TEST(StressCli, PrintsTheTableAndRejectsUnknownConfigurations) {
-  auto r = outcore({"stress", "--config", "bvh-watertight", "--quick", "--stride", "8", "--checked", "50",
-                    "--models", testing::model_path("")});
+  // No --models: the repository's tests/data/models is found from the
+  // binary's location (the test runs in build/tests, not the repository root).
+  auto r = outcore({"stress", "--config", "bvh-watertight", "--quick", "--stride", "8", "--checked", "50"});
   ASSERT_TRUE(r.succeeded()) << r.describe();
   for (const char* part : {"case", "config", "rays", "leaks", "wrong", "max rel t", "sphere +1e6",
                            "beast x1e6", "torus seams", "bvh-watertight"}) {
@@ -141,6 +143,28 @@ TEST(StressCli, PrintsTheTableAndRejectsUnknownConfigurations) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.stderr_text, "'optix'")) << r.stderr_text;
   EXPECT_TRUE(contains(r.stderr_text, "bvh-double")) << r.stderr_text;
+}
+
+TEST(StressCli, NamesWhereItLookedWhenTheModelsAreMissing) {
+  auto r = outcore({"stress", "--quick", "--models", "/nonexistent/outcore-models"});
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.stderr_text, "/nonexistent/outcore-models")) << r.stderr_text;
+  // A binary outside any checkout, run from a directory without the models
+  // (its own), finds none: the error lists where it looked and the flags
+  // that help.
+  TempDir dir;
+  const std::string copy = dir.file("outcore");
+  std::filesystem::copy_file(testing::outcore_binary(), copy);
+  std::filesystem::permissions(copy, std::filesystem::perms::owner_exec, std::filesystem::perm_options::add);
+  testing::SubprocessOptions options;
+  options.timeout = std::chrono::milliseconds(60'000);
+  r = testing::run_subprocess(
+      {"/bin/sh", "-c", "cd '" + dir.path() + "' && exec ./outcore stress --quick --config bvh-watertight"},
+      options);
+  EXPECT_EQ(r.exit_code, 1) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "were not found")) << r.stderr_text;
+  EXPECT_TRUE(contains(r.stderr_text, dir.path() + "/tests/data/models")) << r.stderr_text;
+  EXPECT_TRUE(contains(r.stderr_text, "--no-models")) << r.stderr_text;
 }
 
 }  // namespace

@@ -1,5 +1,7 @@
 #include "core/cache/brick_cache.h"
 
+#include "core/cache/cache_budget.h"
+
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -13,13 +15,6 @@
 
 namespace outcore {
 namespace {
-
-// "1.25 MiB (1310720 bytes)": MiB for people, bytes for small test budgets.
-std::string describe_bytes(uint64_t bytes) {
-  char mib[64];
-  std::snprintf(mib, sizeof(mib), "%.2f MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
-  return std::string(mib) + " (" + std::to_string(bytes) + " bytes)";
-}
 
 // Loads brick `key.brick_id` from the tier when there is one and it holds
 // the brick (*loaded = true), else from the store (checksum verified) and

@@ -3,7 +3,11 @@
 #include <algorithm>
 #include <cstdio>
 #include <memory>
+#include <string>
+#include <vector>
 
+#include "core/accel/brick_accel_factory.h"
+#include "core/cache/cache_budget.h"
 #include "core/cli/commands.h"
 #include "core/proxy/proxy_file.h"
 #include "core/store/scene_store.h"
@@ -59,6 +63,22 @@ ProxyInfo proxy_info(const SceneStore& store) {
   return info;
 }
 
+// The smallest --cache-mb for `trace` and `serve`, per brick structure with
+// its default options (the cache reserves each brick's build bound).
+struct MinimumBudgetRow {
+  std::string accel;
+  MinimumCacheBudget minimum;
+};
+
+std::vector<MinimumBudgetRow> minimum_budgets(const Manifest& m) {
+  std::vector<MinimumBudgetRow> rows;
+  for (const char* accel : {"embree", "bvh"}) {
+    auto builder = make_brick_builder(accel, {});
+    if (builder.ok()) rows.push_back({accel, minimum_cache_budget(m, **builder)});
+  }
+  return rows;
+}
+
 void write_box(JsonWriter& j, const Aabb& b) {
   j.begin_object().key("min").begin_array().value(b.lo.x).value(b.lo.y).value(b.lo.z).end_array();
   j.key("max").begin_array().value(b.hi.x).value(b.hi.y).value(b.hi.z).end_array().end_object();
@@ -91,6 +111,9 @@ std::string info_json(const SceneStore& store) {
   j.key("upper_hierarchy").begin_object();
   j.field("nodes", static_cast<uint64_t>(m.upper.nodes.size())).field("depth", m.upper.depth()).end_object();
   j.field("bytes_on_disk", store.bytes_on_disk());
+  j.key("minimum_cache_mb").begin_object();
+  for (const MinimumBudgetRow& row : minimum_budgets(m)) j.field(row.accel, row.minimum.mib());
+  j.end_object();
   const ProxyInfo proxies = proxy_info(store);
   j.key("proxies").begin_object().field("state", proxies.state);
   if (proxies.state == "valid" || proxies.state == "stale") {
@@ -122,6 +145,10 @@ void print_info(const SceneStore& store) {
               sizes.median, sizes.p90, sizes.max, sizes.mean);
   std::printf("upper BVH     %zu nodes, depth %u\n", m.upper.nodes.size(), m.upper.depth());
   std::printf("on disk       %s\n", human_bytes(static_cast<double>(store.bytes_on_disk())).c_str());
+  std::string budgets;
+  for (const MinimumBudgetRow& row : minimum_budgets(m))
+    budgets += (budgets.empty() ? "" : ", ") + std::to_string(row.minimum.mib()) + " MiB (" + row.accel + ")";
+  std::printf("min cache     %s: the smallest --cache-mb\n", budgets.c_str());
   const ProxyInfo proxies = proxy_info(store);
   if (proxies.state == "valid" || proxies.state == "stale") {
     std::printf("proxies       %s: resolution %u, %llu voxels, %s resident, %s on disk\n",

@@ -6,8 +6,13 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
+#include <system_error>
+#include <vector>
 
 #include "core/accel/stress/stress_runner.h"
 #include "core/accel/stress/stress_scenes.h"
@@ -19,18 +24,68 @@ namespace {
 struct StressArgs {
   std::string config = "all";
   bool quick = false;
-  std::string models_dir = "../shared/models";
+  std::optional<std::string> models_dir;  // unset: find the repository's tests/data/models
+  bool no_models = false;
   uint32_t stride = 1;
   uint32_t checked = 0;  // 0: 1000 with --quick, else 20000
 };
+
+namespace fs = std::filesystem;
+
+// The stress models ship in the repository (tests/data/models). Where to look
+// when --models is not given, so that the command works from any directory:
+// $OUTCORE_MODELS_DIR, then the repository around the running binary (it
+// lives in build*/client/ of a checkout), then the current directory's
+// tests/data/models (the repository root).
+std::vector<fs::path> default_model_dirs() {
+  std::vector<fs::path> dirs;
+  if (const char* env = std::getenv("OUTCORE_MODELS_DIR"); env != nullptr && *env != '\0')
+    dirs.emplace_back(env);
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  if (!ec)
+    for (fs::path dir = exe.parent_path(); !dir.empty() && dir != dir.root_path(); dir = dir.parent_path())
+      dirs.push_back(dir / "tests" / "data" / "models");
+  dirs.push_back(fs::current_path(ec) / "tests" / "data" / "models");
+  return dirs;
+}
+
+bool has_stress_models(const fs::path& dir) {
+  std::error_code ec;
+  return fs::is_regular_file(dir / "fandisk.obj", ec);
+}
+
+// The models directory in effect: --models as given (must exist), nothing
+// with --no-models, else the first default that holds the models; an error
+// listing where it looked otherwise, so a run never silently drops them.
+Expected<std::string> resolve_models_dir(const StressArgs& args) {
+  if (args.no_models) return std::string();
+  if (args.models_dir) {
+    std::error_code ec;
+    if (!fs::is_directory(*args.models_dir, ec))
+      return invalid_argument("--models " + *args.models_dir + ": not a directory");
+    return *args.models_dir;
+  }
+  std::string looked;
+  for (const fs::path& dir : default_model_dirs()) {
+    if (has_stress_models(dir)) return dir.string();
+    looked += "\n  " + dir.string();
+  }
+  return not_found(
+      "the stress models (fandisk.obj, homer.obj, spot.obj, beast.obj) were not found; looked in:" + looked +
+      "\npass --models DIR (the repository's tests/data/models), or --no-models for the generated cases "
+      "only");
+}
 
 int run_stress_command(const StressArgs& args) {
   auto configs = select_stress_configs(args.config);
   if (!configs.ok()) return report_command_error("stress", configs.status().message());
   if (args.stride == 0) return report_command_error("stress", "--stride must be at least 1");
+  auto models_dir = resolve_models_dir(args);
+  if (!models_dir.ok()) return report_command_error("stress", models_dir.status().message());
   StressOptions options;
   options.quick = args.quick;
-  options.models_dir = args.models_dir;
+  options.models_dir = *models_dir;
   options.stride = args.stride;
   const auto start = std::chrono::steady_clock::now();
   auto scenes = make_stress_scenes(options);
@@ -67,8 +122,13 @@ void add_stress_command(CLI::App& app, int& exit_code) {
                   "all, embree, embree-robust, bvh-mt, bvh-watertight or bvh-double")
       ->capture_default_str();
   cmd->add_flag("--quick", args->quick, "Smaller generated meshes and fewer reference checks");
-  cmd->add_option("--models", args->models_dir, "Directory with fandisk.obj, homer.obj, spot.obj, beast.obj")
-      ->capture_default_str();
+  auto* models =
+      cmd->add_option("--models", args->models_dir,
+                      "Directory with fandisk.obj, homer.obj, spot.obj, beast.obj (default: "
+                      "$OUTCORE_MODELS_DIR, else the repository's tests/data/models found from the "
+                      "binary's location or the current directory)");
+  cmd->add_flag("--no-models", args->no_models, "Only the generated cases (no model files)")
+      ->excludes(models);
   cmd->add_option("--stride", args->stride, "Aim at every N-th vertex and edge midpoint")
       ->capture_default_str();
   cmd->add_option("--checked", args->checked,

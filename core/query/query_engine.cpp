@@ -15,6 +15,7 @@
 #include <optional>
 
 #include "core/accel/embree_brick_set.h"
+#include "core/cache/cache_budget.h"
 #include "core/upper/upper_packet_traversal.h"
 #include "core/upper/upper_traversal.h"
 #include "core/upper/upper_wide8_traversal.h"
@@ -231,6 +232,9 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   BrickAccelOptions accel_options = options.accel_options;
   OUTCORE_ASSIGN_OR_RETURN(auto builder, make_brick_builder(options.brick_accel, accel_options));
   OUTCORE_ASSIGN_OR_RETURN(auto policy, make_eviction_policy(options.eviction_policy));
+  // Before the proxies (which may build and write proxies.bin): a budget no
+  // brick-by-brick schedule can work under is the user's error, found now.
+  OUTCORE_RETURN_IF_ERROR(check_cache_budget(store->manifest(), *builder, options.cache_bytes));
   std::unique_ptr<const ProxySet> proxies;
   ProxyOpenReport proxy_report;
   if (options.proxies) {
