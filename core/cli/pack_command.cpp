@@ -1,3 +1,5 @@
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 
@@ -39,7 +41,9 @@ void add_pack_command(CLI::App& app, int& exit_code) {
                   "Part of --mem-mb for OBJ/PLY vertex positions, MiB (0: an eighth); files with more "
                   "resolve their faces out of core")
       ->capture_default_str();
-  cmd->add_flag("--force", options->overwrite, "Replace an existing store at the output path");
+  cmd->add_flag("--force", options->overwrite,
+                "Replace an existing Outcore store at the output path (never anything else, nor an input)");
+  cmd->add_flag("--strict", options->strict, "An input that yields no triangles is an error, not a warning");
   auto no_sync = std::make_shared<bool>(false);
   cmd->add_flag("--no-sync", *no_sync, "Skip fsync before the final rename (faster, not durable)");
   cmd->add_flag("-q,--quiet", *quiet, "No progress bars");
@@ -48,6 +52,9 @@ void add_pack_command(CLI::App& app, int& exit_code) {
     options->show_progress = !*quiet;
     options->sync = !*no_sync;
     install_cancel_signal_handlers();
+    // Warnings (stale temporary directories removed, empty inputs) go beside
+    // the errors, not into the summary on stdout.
+    spdlog::set_default_logger(spdlog::stderr_color_mt("outcore-pack"));
     const auto result = pack_scene(*options);
     if (!result.ok()) {
       exit_code = report_command_error("pack", result.status().message());

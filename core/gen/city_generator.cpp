@@ -1,11 +1,13 @@
 #include "core/gen/city_generator.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <numbers>
 
 #include "core/io/source_factory.h"
+#include "core/util/cancellation.h"
 
 #include "core/gen/splitmix.h"
 
@@ -57,7 +59,8 @@ CityGenerator::CityGenerator(std::string description, const CityConfig& config, 
   while (side_ > 1 && (side_ - 1) * (side_ - 1) >= config_.copies) --side_;
 }
 
-Expected<std::unique_ptr<CityGenerator>> CityGenerator::create(const GenSpec& spec) {
+Expected<std::unique_ptr<CityGenerator>> CityGenerator::create(const GenSpec& spec,
+                                                               const GeneratorOptions& options) {
   OUTCORE_ASSIGN_OR_RETURN(const CityConfig config, CityConfig::parse(spec));
   const std::string where = "gen:city: parameter 'of'";
   const auto too_many = [&](uint64_t base_count) {
@@ -66,22 +69,47 @@ Expected<std::unique_ptr<CityGenerator>> CityGenerator::create(const GenSpec& sp
                             std::to_string(kMaxGeneratedTriangles) +
                             " primitive ids of one input; use fewer copies or a smaller base");
   };
+  const uint64_t limit = options.mesh_memory_bytes;
+  const auto mib = [](uint64_t bytes) { return std::to_string((bytes + (1 << 20) - 1) >> 20) + " MiB"; };
+  const auto too_large = [&](const std::string& needs) {
+    return resource_exhausted(
+        "gen:city: the base mesh '" + config.of + "' needs " + needs + " in memory, more than the " +
+        mib(limit) + " allowed for it" +
+        (options.mesh_memory_origin.empty() ? "" : " (" + options.mesh_memory_origin + ")") +
+        "; use a smaller base or allow more memory");
+  };
 
-  auto opened = open_triangle_source(config.of);
+  // A nested generator gets the same limit (a city of cities holds both bases
+  // while the outer one is read).
+  auto opened =
+      config.of.starts_with("gen:") ? make_generator(config.of, options) : open_triangle_source(config.of);
   if (!opened.ok()) return opened.status().with_context(where);
   std::unique_ptr<TriangleSource> source = std::move(opened).value();
 
   IndexedMeshBuilder builder;
+  uint64_t expected = 0;  // 0: not known before reading
   if (const auto* gen = dynamic_cast<const Generator*>(source.get())) {
-    // Known count: check the id budget before reading, and allocate exactly.
-    const uint64_t count = gen->triangle_count();
-    if (count != 0 && static_cast<uint64_t>(config.copies) > kMaxGeneratedTriangles / count) {
-      return too_many(count);
+    // Known count: check the id budget and the memory before reading (a base
+    // too large to hold would otherwise take minutes and gigabytes to find
+    // out), and allocate exactly.
+    expected = gen->triangle_count();
+    if (expected != 0 && static_cast<uint64_t>(config.copies) > kMaxGeneratedTriangles / expected) {
+      return too_many(expected);
     }
-    builder.reserve_triangles(count);
+    const uint64_t index_bytes = expected * sizeof(std::array<uint32_t, 3>);
+    if (limit != 0 && index_bytes > limit) {
+      return too_large("at least " + mib(index_bytes) + " (" + std::to_string(expected) +
+                       " triangles x 12 B, before its vertices)");
+    }
+    builder.reserve_triangles(expected);
   }
   std::size_t read = 0;
+  Status stopped;  // the sink's own verdicts, returned without the stream's context
   CallbackSink sink([&](std::span<const Triangle> batch) {
+    if (cancel_requested()) {
+      stopped = cancelled("gen:city: interrupted while reading the base mesh '" + config.of + "'");
+      return stopped;
+    }
     for (const Triangle& t : batch) {
       if (!t.is_finite()) {
         return invalid_argument("triangle " + std::to_string(read) + " has a non-finite vertex");
@@ -89,9 +117,18 @@ Expected<std::unique_ptr<CityGenerator>> CityGenerator::create(const GenSpec& sp
       OUTCORE_RETURN_IF_ERROR(builder.add(t));
       ++read;
     }
+    if (limit != 0 && builder.memory_bytes() > limit) {
+      stopped = too_large("more than " + mib(limit) + " (" + mib(builder.memory_bytes()) + " after " +
+                          std::to_string(read) + (expected != 0 ? " of " + std::to_string(expected) : "") +
+                          " triangles)");
+      return stopped;
+    }
     return Status::Ok();
   });
-  if (Status s = source->stream(sink); !s.ok()) return s.with_context(where + " ('" + config.of + "')");
+  if (Status s = source->stream(sink); !s.ok()) {
+    if (!stopped.ok()) return stopped;
+    return s.with_context(where + " ('" + config.of + "')");
+  }
   IndexedMesh base = builder.finish();
 
   if (base.triangle_count() == 0) return invalid_argument(where + ": '" + config.of + "' has no triangles");
@@ -142,12 +179,25 @@ Status CityGenerator::emit_range(uint64_t first, uint64_t last, TriangleBatcher&
   // per copy, and the transform is a pure function of the vertex, so this is
   // bit-identical to transforming every triangle corner.
   const uint64_t base_count = base_.triangle_count();
-  std::vector<Vec3f> world(base_.vertices.size());
+  std::vector<Vec3f> world;
   for (uint64_t copy = first / base_count; copy * base_count < last; ++copy) {
     const CopyTransform t = copy_transform(static_cast<int64_t>(copy));
-    for (std::size_t i = 0; i < world.size(); ++i) world[i] = t.apply(base_.vertices[i]);
     const uint64_t begin = std::max(first, copy * base_count) - copy * base_count;
     const uint64_t end = std::min(last, (copy + 1) * base_count) - copy * base_count;
+    // A range of a small part of a huge base transforms its own corners:
+    // transforming every base vertex would cost time and scratch memory in
+    // proportion to the base for every such range.
+    if (3 * (end - begin) < base_.vertices.size()) {
+      for (uint64_t k = begin; k < end; ++k) {
+        const auto& tri = base_.triangles[k];
+        OUTCORE_RETURN_IF_ERROR(
+            out.add(Triangle{t.apply(base_.vertices[tri[0]]), t.apply(base_.vertices[tri[1]]),
+                             t.apply(base_.vertices[tri[2]])}));
+      }
+      continue;
+    }
+    world.resize(base_.vertices.size());
+    for (std::size_t i = 0; i < world.size(); ++i) world[i] = t.apply(base_.vertices[i]);
     for (uint64_t k = begin; k < end; ++k) {
       const auto& tri = base_.triangles[k];
       OUTCORE_RETURN_IF_ERROR(out.add(Triangle{world[tri[0]], world[tri[1]], world[tri[2]]}));

@@ -11,8 +11,12 @@
 //
 // Memory: one copy of the base mesh, read once at creation through
 // open_triangle_source(of) and kept welded (IndexedMesh: 12 B per unique vertex
-// + 12 B per triangle), plus 12 B per base vertex of scratch while streaming;
-// independent of `copies`. Each copy transforms every unique base vertex once.
+// + 12 B per triangle), plus, per emitting thread, 12 B per base vertex of
+// scratch when a range covers enough of a copy to pay for it (else corners are
+// transformed one by one, so the scratch never exceeds 36 B per triangle of
+// the range); independent of `copies`. GeneratorOptions::mesh_memory_bytes
+// bounds the base while it is read (refused up front when its triangles alone
+// exceed it), and reading it stops on cancellation (cancellation.h).
 //
 // Parameters: of (base mesh, default gen:sphere?level=3; wrap a nested spec in
 // parentheses), copies (1..1e9, default 100), seed (0..2^63-1, default 1),
@@ -29,6 +33,7 @@
 
 #include "core/gen/gen_spec.h"
 #include "core/gen/generator.h"
+#include "core/gen/generator_factory.h"
 #include "core/gen/indexed_mesh.h"
 
 namespace outcore {
@@ -59,7 +64,8 @@ struct CopyTransform {
 class CityGenerator final : public Generator {
  public:
   // Reads the base mesh (errors from `of` are returned with context naming it).
-  static Expected<std::unique_ptr<CityGenerator>> create(const GenSpec& spec);
+  static Expected<std::unique_ptr<CityGenerator>> create(const GenSpec& spec,
+                                                         const GeneratorOptions& options = {});
 
   const CityConfig& config() const { return config_; }
   uint64_t triangle_count() const override {
@@ -73,6 +79,11 @@ class CityGenerator final : public Generator {
 
   // The base mesh exactly as `of` streamed it (triangle k = base().triangle(k)).
   const IndexedMesh& base() const { return base_; }
+  // Bytes the base mesh holds for the generator's lifetime.
+  uint64_t base_memory_bytes() const {
+    return base_.vertices.capacity() * sizeof(Vec3f) +
+           base_.triangles.capacity() * sizeof(base_.triangles[0]);
+  }
   double cell_size() const { return cell_; }
   CopyTransform copy_transform(int64_t copy) const;
 

@@ -10,6 +10,8 @@
 #include <set>
 
 #include "core/gen/gen_test_util.h"
+#include "core/gen/generator_factory.h"
+#include "core/util/cancellation.h"
 
 namespace outcore {
 namespace {
@@ -166,6 +168,42 @@ class CountingSink final : public TriangleSink {
   uint64_t count = 0;
   double checksum = 0;
 };
+
+// A huge base takes minutes to read: an interrupt must stop the reading itself.
+TEST(CityGenerator, ReadingTheBaseStopsOnCancellation) {
+  request_cancel();
+  auto city = make_generator("gen:city?of=(gen:sphere?level=5)&copies=2");
+  reset_cancel();
+  ASSERT_FALSE(city.ok());
+  EXPECT_EQ(city.status().code(), StatusCode::kCancelled);
+  EXPECT_NE(city.status().message().find("interrupted"), std::string::npos) << city.status().to_string();
+}
+
+TEST(CityGenerator, BaseMemoryLimitRefusesUpFrontOrWhileReadingAndNamesTheBase) {
+  GeneratorOptions options;
+  options.mesh_memory_bytes = 100'000;
+  options.mesh_memory_origin = "the test's limit";
+  // 20 * 4^5 = 20480 triangles: 240 KB of triples before any vertex.
+  auto up_front = make_generator("gen:city?of=(gen:sphere?level=5)&copies=2", options);
+  ASSERT_FALSE(up_front.ok());
+  EXPECT_EQ(up_front.status().code(), StatusCode::kResourceExhausted);
+  for (const char* part : {"'gen:sphere?level=5'", "at least 1 MiB", "the test's limit"})
+    EXPECT_NE(up_front.status().message().find(part), std::string::npos) << up_front.status().to_string();
+  // 5120 triangles: 60 KB of triples fit, with 2562 vertices and the table they do not.
+  auto while_read = make_generator("gen:city?of=(gen:sphere?level=4)&copies=2", options);
+  ASSERT_FALSE(while_read.ok());
+  EXPECT_EQ(while_read.status().code(), StatusCode::kResourceExhausted);
+  EXPECT_NE(while_read.status().message().find("of 5120 triangles"), std::string::npos)
+      << while_read.status().to_string();
+  // A nested base is held under the same limit.
+  EXPECT_EQ(
+      make_generator("gen:city?of=(gen:city?of=(gen:sphere?level=5)&copies=2)", options).status().code(),
+      StatusCode::kResourceExhausted);
+  // Under the limit nothing changes.
+  options.mesh_memory_bytes = 1 << 20;
+  auto fits = make_generator("gen:city?of=(gen:sphere?level=4)&copies=2", options);
+  ASSERT_TRUE(fits.ok()) << fits.status().to_string();
+}
 
 TEST(GeneratorBench, DISABLED_Throughput) {
   for (const std::string spec :

@@ -13,12 +13,18 @@ namespace outcore {
 
 namespace {
 
-using Create = Expected<std::unique_ptr<Generator>> (*)(const GenSpec&);
+using Create = Expected<std::unique_ptr<Generator>> (*)(const GenSpec&, const GeneratorOptions&);
 
 template <class G>
-Expected<std::unique_ptr<Generator>> create_as_generator(const GenSpec& spec) {
-  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<G> g, G::create(spec));
-  return std::unique_ptr<Generator>(std::move(g));
+Expected<std::unique_ptr<Generator>> create_as_generator(const GenSpec& spec,
+                                                         const GeneratorOptions& options) {
+  if constexpr (requires { G::create(spec, options); }) {
+    OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<G> g, G::create(spec, options));
+    return std::unique_ptr<Generator>(std::move(g));
+  } else {
+    OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<G> g, G::create(spec));
+    return std::unique_ptr<Generator>(std::move(g));
+  }
 }
 
 struct Entry {
@@ -43,7 +49,8 @@ std::string known_names() {
 
 }  // namespace
 
-Expected<std::unique_ptr<Generator>> make_typed_generator(const std::string& spec) {
+Expected<std::unique_ptr<Generator>> make_typed_generator(const std::string& spec,
+                                                          const GeneratorOptions& options) {
   if (!spec.starts_with("gen:")) {
     return invalid_argument("generator spec '" + spec + "' does not start with 'gen:'");
   }
@@ -58,11 +65,12 @@ Expected<std::unique_ptr<Generator>> make_typed_generator(const std::string& spe
                      "' (known: " + known_names() + ")");
   }
   OUTCORE_ASSIGN_OR_RETURN(const GenSpec parsed, parse_gen_spec(spec));
-  return entry->create(parsed);
+  return entry->create(parsed, options);
 }
 
-Expected<std::unique_ptr<TriangleSource>> make_generator(const std::string& spec) {
-  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<Generator> g, make_typed_generator(spec));
+Expected<std::unique_ptr<TriangleSource>> make_generator(const std::string& spec,
+                                                         const GeneratorOptions& options) {
+  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<Generator> g, make_typed_generator(spec, options));
   return std::unique_ptr<TriangleSource>(std::move(g));
 }
 

@@ -43,6 +43,11 @@ class IndexedMeshBuilder {
   void reserve_triangles(std::size_t n) { mesh_.triangles.reserve(n); }
   // Fails (RESOURCE_EXHAUSTED) only if the mesh exceeds 2^32 - 1 vertices or triangles.
   Status add(const Triangle& t);
+  // What the builder holds now (mesh and welding table, by capacity).
+  uint64_t memory_bytes() const {
+    return mesh_.vertices.capacity() * sizeof(Vec3f) +
+           mesh_.triangles.capacity() * sizeof(mesh_.triangles[0]) + table_.capacity() * sizeof(uint32_t);
+  }
   // The welded mesh, capacity trimmed; the builder is empty afterwards.
   IndexedMesh finish();
 

@@ -28,6 +28,7 @@
 #include <string_view>
 #include <system_error>
 
+#include "core/geometry/coordinate_limits.h"
 #include "core/io/text_line_reader.h"
 #include "core/io/vertex_spill.h"
 
@@ -115,6 +116,11 @@ class ObjPass {
       if (!std::isfinite(value)) {
         return error(std::string("vertex coordinate ") + kAxes[axis] + " is not finite ('" +
                      std::string(token) + "')");
+      }
+      if (!within_vertex_range(value)) {
+        return error(std::string("vertex coordinate ") + kAxes[axis] + " = " + std::string(token) +
+                     " is beyond " + kLargestVertexComponentText +
+                     ", the largest the float ray/triangle tests handle (docs/INPUTS.md)");
       }
     }
     // w (or colours) are not used, but a garbled one still means a damaged file.

@@ -33,6 +33,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "core/geometry/coordinate_limits.h"
 #include "core/io/text_line_reader.h"
 #include "core/io/vertex_spill.h"
 
@@ -612,6 +613,12 @@ class PlyPass {
           return item_error(body, element, item,
                             std::string("coordinate ") + kAxes[axis] + " is not finite in float32 (" +
                                 format_number(xyz[axis]) + ")");
+        }
+        if (!within_vertex_range(position[axis])) {
+          return item_error(body, element, item,
+                            std::string("coordinate ") + kAxes[axis] + " = " + format_number(xyz[axis]) +
+                                " is beyond " + kLargestVertexComponentText +
+                                ", the largest the float ray/triangle tests handle (docs/INPUTS.md)");
         }
       }
       OUTCORE_RETURN_IF_ERROR(faces_.add_vertex(position));

@@ -17,13 +17,25 @@ namespace {
 
 // Opens path for reading into fd (-1 on failure, closed by the caller).
 Status open_for_reading(const std::string& path, int& fd) {
-  fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer
+  // for ever, before there is any file type to check.
+  fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) return io_error_from_errno(path);
   struct stat info;
   if (::fstat(fd, &info) != 0) return io_error_from_errno(path);
-  // open() succeeds on a directory; only the first read would fail, with a
-  // less helpful message.
+  // open() succeeds on a directory, a FIFO or a device; reading them fails
+  // late with a less helpful message, blocks, or never ends.
   if (S_ISDIR(info.st_mode)) return invalid_argument(path + ": is a directory, not a file");
+  if (!S_ISREG(info.st_mode)) {
+    const char* kind = S_ISFIFO(info.st_mode)   ? "a FIFO"
+                       : S_ISCHR(info.st_mode)  ? "a character device"
+                       : S_ISBLK(info.st_mode)  ? "a block device"
+                       : S_ISSOCK(info.st_mode) ? "a socket"
+                                                : "a special file";
+    return invalid_argument(path + ": is " + kind + ", not a regular file");
+  }
+  const int flags = ::fcntl(fd, F_GETFL);
+  if (flags < 0 || ::fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) != 0) return io_error_from_errno(path);
   return Status::Ok();
 }
 

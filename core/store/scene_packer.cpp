@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
+#include <spdlog/spdlog.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
@@ -15,12 +16,17 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <memory>
 #include <mutex>
 
+#include "core/gen/city_generator.h"
 #include "core/gen/generator.h"
+#include "core/gen/generator_factory.h"
+#include "core/geometry/coordinate_limits.h"
 #include "core/io/source_factory.h"
+#include "core/proxy/proxy_file.h"
 #include "core/store/brick_partitioner.h"
 #include "core/store/centroid_grid.h"
 #include "core/store/manifest.h"
@@ -57,9 +63,13 @@ struct MemoryPlan {
   // pipeline's per-token chunk buffers, and each cell's subgroup.
   uint64_t chunk_table = 0;
   uint64_t filter_buffers = 0;
+  // Meshes generators hold for their lifetime (gen:city's base), at most
+  // half of the budget (open_sources).
+  uint64_t generator_meshes = 0;
   uint64_t reserved() const {
     return uint64_t{grid_cells} * (sizeof(CellStats) + 2 * sizeof(uint32_t)) + 2 * brick_buffer + staging +
-           2 * read_chunk + spill_buffers + batches + source_vertices + chunk_table + filter_buffers;
+           2 * read_chunk + spill_buffers + batches + source_vertices + chunk_table + filter_buffers +
+           generator_meshes;
   }
   static MemoryPlan for_budget(uint64_t budget) {
     MemoryPlan plan{};
@@ -103,9 +113,18 @@ struct InputChunk {
 // Per-chunk results of the scan, merged in chunk order.
 struct ChunkScan {
   uint64_t degenerate = 0;
-  uint64_t first_non_finite = ~uint64_t{0};  // primitive id, or none
+  uint64_t first_bad = ~uint64_t{0};  // primitive id of the first triangle vertex_problem() refuses, or none
+  const char* problem = nullptr;      // and why
   Aabb bounds, centroid_bounds;
 };
+
+// Absolute, and "scene/" names the directory scene, not an entry inside it.
+fs::path normalized_output(const std::string& output) {
+  std::error_code ec;
+  fs::path path = fs::absolute(output, ec).lexically_normal();
+  if (!path.has_filename()) path = path.parent_path();
+  return path;
+}
 
 // Wall time per packer phase, reported in the summary.
 class PhaseTimer {
@@ -162,6 +181,10 @@ class ScenePacker {
 
  private:
   Status validate_options() const;
+  // --force: whether the existing `output` may be replaced (an Outcore store
+  // holding no input of this pack); an error naming what it is otherwise.
+  Status check_replaceable(const fs::path& output) const;
+  void remove_stale_partials(const fs::path& output) const;
   Status open_sources(const SourceOptions& source_options);
   Status scan();
   PackedStream input_stream();
@@ -225,16 +248,97 @@ Status ScenePacker::validate_options() const {
   }
   if (options_.inputs.size() >= 0xffffffffull) return invalid_argument("too many inputs");
   std::error_code ec;
-  if (fs::exists(options_.output, ec) && !options_.overwrite) {
-    return already_exists("output " + options_.output + " already exists (use --force to replace it)");
+  const fs::path output = normalized_output(options_.output);
+  // symlink_status: a dangling link at -o is something there too.
+  if (fs::exists(fs::symlink_status(output, ec))) {
+    if (!options_.overwrite) {
+      return already_exists("output " + options_.output + " already exists (use --force to replace it)");
+    }
+    OUTCORE_RETURN_IF_ERROR(check_replaceable(output));
   }
   return Status::Ok();
 }
 
+Status ScenePacker::check_replaceable(const fs::path& output) const {
+  std::error_code ec;
+  // An input inside the target (or the target itself) would be deleted with it.
+  for (const std::string& input : options_.inputs) {
+    if (input.starts_with("gen:")) continue;
+    const fs::path real = fs::canonical(input, ec);
+    if (ec) continue;  // a missing input fails when it is opened
+    for (fs::path p = real;; p = p.parent_path()) {
+      if (fs::equivalent(p, output, ec)) {
+        return invalid_argument("refusing to replace " + output.string() + " (--force): input '" + input +
+                                "' of this pack " + (p == real ? "is that path" : "lies inside it"));
+      }
+      if (p == p.parent_path()) break;
+    }
+  }
+  const std::string refusal = "refusing to replace " + output.string() + " (--force replaces only a store): ";
+  const fs::file_status status = fs::symlink_status(output, ec);
+  if (fs::is_symlink(status))
+    return failed_precondition(refusal + "it is a symbolic link; give the store's own path");
+  if (!fs::is_directory(status)) {
+    return failed_precondition(
+        refusal + (fs::is_regular_file(status) ? "it is a regular file" : "it is not a directory") +
+        ", not an Outcore store");
+  }
+  // A store is what this packer writes: the manifest with the store's magic
+  // (of any format version, or damaged: repacking is how such a store is
+  // mended) and nothing but store files, so that nothing else can be lost.
+  const std::string manifest = (output / kManifestFileName).string();
+  char magic[sizeof kManifestMagic] = {};
+  {
+    std::ifstream in(manifest, std::ios::binary);
+    in.read(magic, sizeof magic);
+    if (!in || std::memcmp(magic, kManifestMagic, sizeof magic) != 0)
+      return failed_precondition(refusal + "it is not an Outcore store (no " +
+                                 std::string(kManifestFileName) + " with the store's magic)");
+  }
+  for (fs::directory_iterator it(output, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    const bool store_file = name == kManifestFileName || name == kBrickDataFileName ||
+                            name == kProxyFileName ||
+                            name.starts_with(std::string(kProxyFileName) + ".partial-");
+    if (!store_file)
+      return failed_precondition(refusal + "it holds '" + name + "', which is not part of an Outcore store");
+  }
+  if (ec) return io_error("cannot list " + output.string() + ": " + ec.message());
+  return Status::Ok();
+}
+
+void ScenePacker::remove_stale_partials(const fs::path& output) const {
+  // A pack that died (SIGKILL, power loss) could not remove its temporary
+  // directory; left alone, these pile up and fill the disk.
+  for (const StalePartial& stale : find_stale_partials(output.string())) {
+    std::error_code ec;
+    fs::remove_all(stale.path, ec);
+    if (ec) {
+      spdlog::warn("cannot remove {}, left by pack process {} (no longer running): {}", stale.path, stale.pid,
+                   ec.message());
+    } else {
+      spdlog::warn("removed {}, left by pack process {} (no longer running)", stale.path, stale.pid);
+    }
+  }
+}
+
 Status ScenePacker::open_sources(const SourceOptions& source_options) {
+  // Half the budget, as for --vertex-mem-mb: the rest must still hold a brick.
+  const uint64_t allowance = options_.memory_mb * kMiB / 2;
+  const std::string origin = "half of --mem-mb " + std::to_string(options_.memory_mb);
   for (const std::string& spec : options_.inputs) {
-    auto source = open_triangle_source(spec, source_options);
+    OUTCORE_RETURN_IF_ERROR(check_cancel());
+    GeneratorOptions generator_options;
+    // Bases of several cities are held at once, so each gets what is left (a
+    // held base never exceeds the limit it was read under: at least 1 is left).
+    generator_options.mesh_memory_bytes = std::max<uint64_t>(1, allowance - memory_.generator_meshes);
+    generator_options.mesh_memory_origin =
+        memory_.generator_meshes == 0 ? origin : "what the earlier gen:city bases left of " + origin;
+    auto source = spec.starts_with("gen:") ? make_generator(spec, generator_options)
+                                           : open_triangle_source(spec, source_options);
     if (!source.ok()) return source.status();
+    if (const auto* city = dynamic_cast<const CityGenerator*>(source->get()))
+      memory_.generator_meshes += city->base_memory_bytes();
     sources_.push_back(std::move(source).value());
   }
   return Status::Ok();
@@ -249,10 +353,9 @@ Status ScenePacker::scan() {
     auto sink = CallbackSink([&](std::span<const Triangle> batch) -> Status {
       OUTCORE_RETURN_IF_ERROR(check_cancel());
       for (const Triangle& t : batch) {
-        if (!t.is_finite()) {
+        if (const char* problem = vertex_problem(t)) {
           return invalid_argument("input " + std::to_string(g) + " '" + record.spec + "': triangle " +
-                                  std::to_string(record.triangle_count) +
-                                  " has a NaN or infinite coordinate");
+                                  std::to_string(record.triangle_count) + " " + problem);
         }
         record.degenerate_count += t.is_degenerate();
         scan_.bounds.extend(t.bounds());
@@ -274,6 +377,15 @@ Status ScenePacker::scan() {
     scan_.inputs.push_back(std::move(record));
   }
   bar.finish();
+  // A file that is not what it claims (an OBJ of unknown statements) parses
+  // to nothing; silently packing the rest would hide the mistake.
+  for (size_t g = 0; g < scan_.inputs.size(); ++g) {
+    if (scan_.inputs[g].triangle_count != 0) continue;
+    const std::string what =
+        "input " + std::to_string(g) + " '" + scan_.inputs[g].spec + "' has no triangles";
+    if (options_.strict) return invalid_argument(what + " (--strict)");
+    if (scan_.triangles != 0) spdlog::warn("{}; it contributes nothing to the scene", what);
+  }
   if (scan_.triangles == 0) return invalid_argument("the scene is empty: no input has any triangle");
   return Status::Ok();
 }
@@ -617,8 +729,9 @@ Status ScenePacker::scan_chunks() {
     Status s = generate_chunk(chunks_[i], [&](std::span<const Triangle> batch, uint64_t id) -> Status {
       for (std::size_t k = 0; k < batch.size(); ++k) {
         const Triangle& t = batch[k];
-        if (!t.is_finite()) {
-          r.first_non_finite = std::min(r.first_non_finite, id + k);
+        if (const char* problem = vertex_problem(t)) {
+          if (id + k < r.first_bad) r.problem = problem;
+          r.first_bad = std::min(r.first_bad, id + k);
           continue;
         }
         r.degenerate += t.is_degenerate();
@@ -640,9 +753,9 @@ Status ScenePacker::scan_chunks() {
     for (std::size_t i = 0; i < chunks_.size(); ++i) {
       if (chunks_[i].input != g) continue;
       const ChunkScan& r = results[i];
-      if (r.first_non_finite != ~uint64_t{0}) {
+      if (r.first_bad != ~uint64_t{0}) {
         return invalid_argument("input " + std::to_string(g) + " '" + record.spec + "': triangle " +
-                                std::to_string(r.first_non_finite) + " has a NaN or infinite coordinate");
+                                std::to_string(r.first_bad) + " " + r.problem);
       }
       record.degenerate_count += r.degenerate;
       scan_.bounds.extend(r.bounds);
@@ -970,8 +1083,9 @@ Expected<PackSummary> ScenePacker::run() {
   // of core keep their spill files in it (each in a directory of its own,
   // removed with its source before the store is renamed into place).
   std::error_code ec;
-  const fs::path output_path = fs::absolute(options_.output, ec);
+  const fs::path output_path = normalized_output(options_.output);
   fs::create_directories(output_path.parent_path(), ec);
+  remove_stale_partials(output_path);
   OUTCORE_RETURN_IF_ERROR(temp_.create_beside(output_path.string()));
   OUTCORE_RETURN_IF_ERROR(open_sources({memory_.source_vertices, temp_.path()}));
   const bool generated = collect_ranged_generators();
@@ -1057,7 +1171,12 @@ Expected<PackSummary> ScenePacker::run() {
   // Swap into place. An existing store is moved aside first and removed only
   // after the new one is in place.
   std::string displaced;
-  if (fs::exists(output_path, ec)) {
+  if (fs::exists(fs::symlink_status(output_path, ec))) {
+    // Checked again: what is there may have changed while the pack ran.
+    if (!options_.overwrite) {
+      return already_exists("output " + options_.output + " already exists (use --force to replace it)");
+    }
+    OUTCORE_RETURN_IF_ERROR(check_replaceable(output_path));
     // A leftover of an interrupted run of a process with the same pid must not
     // block the swap.
     const std::string base = output_path.string() + ".replaced-" + std::to_string(::getpid());

@@ -10,7 +10,10 @@
 // The store appears atomically: everything is written into a temporary
 // directory beside the output, synced, and renamed into place; on any error
 // or cancellation (cancellation.h) the temporary directory is removed, and an
-// existing store at the output path is never touched unless overwrite is set.
+// existing store at the output path is never touched unless overwrite is set;
+// even then only an Outcore store is replaced, never another file or
+// directory, nor one holding an input. Temporary directories left by packs
+// that died are removed (and logged) by the next pack to the same output.
 //
 // Thread-safety: reentrant; uses TBB internally.
 #pragma once
@@ -41,6 +44,8 @@ struct PackOptions {
   uint64_t vertex_memory_mb = 0;
   // Replace an existing store at `output` (after the new one is complete).
   bool overwrite = false;
+  // An input that yields no triangles is an error (otherwise a warning).
+  bool strict = false;
   // fsync the store before the rename (durable against power loss).
   bool sync = true;
   // Progress bars on stderr.

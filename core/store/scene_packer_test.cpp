@@ -652,6 +652,154 @@ TEST(ScenePackerAtomicity, FailingPackWithOverwriteLeavesTheOldStoreIntact) {
   EXPECT_TRUE(SceneStore::open(out).ok());
 }
 
+// ---- --force replaces only an Outcore store ----------------------------------------
+
+// Every file under dir (recursively) with its bytes.
+std::map<std::string, std::string> tree_snapshot(const std::string& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : fs::recursive_directory_iterator(dir)) {
+    if (!entry.is_regular_file()) continue;
+    files[fs::relative(entry.path(), dir).string()] = testing::read_file_bytes(entry.path().string());
+  }
+  return files;
+}
+
+Expected<PackSummary> force_pack(const std::vector<std::string>& inputs, const std::string& output) {
+  auto options = options_for(inputs, output, 1000);
+  options.overwrite = true;
+  return pack_scene(options);
+}
+
+void expect_refused_naming(const Expected<PackSummary>& result, const std::string& path,
+                           const std::string& why) {
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.status().message().find(path), std::string::npos) << result.status().to_string();
+  EXPECT_NE(result.status().message().find(why), std::string::npos) << result.status().to_string();
+}
+
+TEST(ScenePackerForce, ADirectoryOfUserFilesIsRefusedAndKeptIntact) {
+  TempDir dir;
+  const std::string out = dir.file("photos");
+  fs::create_directories(out + "/2026");
+  write_text_file(out + "/notes.txt", "precious");
+  write_text_file(out + "/2026/a.jpg", "also precious");
+  const auto before = tree_snapshot(out);
+  expect_refused_naming(force_pack({"gen:torus"}, out), out, "not an Outcore store");
+  EXPECT_EQ(tree_snapshot(out), before);
+  EXPECT_EQ(directory_entries(dir.path()), std::vector<std::string>{"photos"});
+}
+
+TEST(ScenePackerForce, ARegularFileIsRefusedAndKeptIntact) {
+  TempDir dir;
+  const std::string out = dir.file("s");
+  write_text_file(out, "precious");
+  expect_refused_naming(force_pack({"gen:torus"}, out), out, "regular file");
+  EXPECT_EQ(testing::read_file_bytes(out), "precious");
+  EXPECT_EQ(directory_entries(dir.path()), std::vector<std::string>{"s"});
+}
+
+TEST(ScenePackerForce, TheInputItselfIsNeverReplaced) {
+  TempDir dir;
+  const std::string input = dir.file("tri.obj");
+  const std::string text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  write_text_file(input, text);
+  expect_refused_naming(force_pack({"gen:torus", input}, input), input, "input");
+  EXPECT_EQ(testing::read_file_bytes(input), text);
+  EXPECT_EQ(directory_entries(dir.path()), std::vector<std::string>{"tri.obj"});
+}
+
+// A store that somebody put an input into: the input would go with the store.
+TEST(ScenePackerForce, AStoreHoldingAnInputIsRefusedAndKeptIntact) {
+  TempDir dir;
+  const std::string out = dir.file("s");
+  ASSERT_TRUE(pack_scene(options_for({"gen:sphere?level=2"}, out, 64)).ok());
+  const std::string input = out + "/tri.obj";
+  write_text_file(input, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const auto before = tree_snapshot(out);
+  // Also through another spelling of the same path.
+  for (const std::string& spelled : {input, dir.path() + "/./s/../s/tri.obj"}) {
+    SCOPED_TRACE(spelled);
+    expect_refused_naming(force_pack({spelled}, out), out, "lies inside it");
+    EXPECT_EQ(tree_snapshot(out), before);
+  }
+  EXPECT_EQ(directory_entries(dir.path()), std::vector<std::string>{"s"});
+}
+
+TEST(ScenePackerForce, AStoreHoldingOtherFilesIsRefusedAndKeptIntact) {
+  TempDir dir;
+  const std::string out = dir.file("s");
+  ASSERT_TRUE(pack_scene(options_for({"gen:sphere?level=2"}, out, 64)).ok());
+  write_text_file(out + "/notes.txt", "precious");
+  const auto before = tree_snapshot(out);
+  expect_refused_naming(force_pack({"gen:torus"}, out), out, "'notes.txt'");
+  EXPECT_EQ(tree_snapshot(out), before);
+}
+
+TEST(ScenePackerForce, ASymbolicLinkIsRefusedAndItsTargetKept) {
+  TempDir dir;
+  const std::string target = dir.file("s");
+  ASSERT_TRUE(pack_scene(options_for({"gen:sphere?level=2"}, target, 64)).ok());
+  const auto before = tree_snapshot(target);
+  fs::create_directory_symlink(target, dir.file("link"));
+  expect_refused_naming(force_pack({"gen:torus"}, dir.file("link")), dir.file("link"), "symbolic link");
+  EXPECT_EQ(tree_snapshot(target), before);
+  EXPECT_TRUE(fs::is_symlink(dir.file("link")));
+}
+
+// The store a server has opened gets proxies.bin beside it; it is still a store.
+TEST(ScenePackerForce, AStoreWithItsProxyFileIsReplaced) {
+  TempDir dir;
+  const std::string out = dir.file("s");
+  ASSERT_TRUE(pack_scene(options_for({"gen:sphere?level=2"}, out, 64)).ok());
+  write_text_file(out + "/proxies.bin", "cache");
+  const auto summary = force_pack({"gen:torus"}, out);
+  ASSERT_TRUE(summary.ok()) << summary.status().to_string();
+  expect_round_trip(out, {"gen:torus"}, 1000, *summary);
+  EXPECT_FALSE(fs::exists(out + "/proxies.bin"));
+  EXPECT_EQ(directory_entries(dir.path()), std::vector<std::string>{"s"});
+}
+
+// ---- a city's base mesh under the memory bound -----------------------------------
+
+// 20 * 4^9 = 5.2 M triangles: 60 MiB of index triples alone, more than half of
+// 32 MiB. Refused before the base is generated (it would take seconds).
+TEST(ScenePackerCityBase, ABaseWhoseTrianglesExceedHalfTheBudgetIsRefusedUpFront) {
+  TempDir dir;
+  const auto start = std::chrono::steady_clock::now();
+  const auto result =
+      pack_scene(options_for({"gen:city?of=(gen:sphere?level=9)&copies=2"}, dir.file("s"), 1000, 32));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.status().code(), StatusCode::kResourceExhausted);
+  for (const char* part : {"gen:city", "gen:sphere?level=9", "60 MiB", "16 MiB", "--mem-mb 32"})
+    EXPECT_NE(result.status().message().find(part), std::string::npos)
+        << part << " in " << result.status().to_string();
+  EXPECT_LT(seconds, 1.0);
+  EXPECT_TRUE(directory_entries(dir.path()).empty());
+}
+
+// 20 * 4^8 = 1.3 M triangles: 15 MiB of triples fit in 16 MiB, the vertices and
+// the welding table do not; found while reading, long before the whole base.
+TEST(ScenePackerCityBase, ABaseThatOutgrowsHalfTheBudgetWhileReadIsRefused) {
+  TempDir dir;
+  const auto result =
+      pack_scene(options_for({"gen:city?of=(gen:sphere?level=8)&copies=2"}, dir.file("s"), 1000, 32));
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.status().code(), StatusCode::kResourceExhausted);
+  for (const char* part : {"gen:sphere?level=8", "more than 16 MiB", "of 1310720 triangles", "--mem-mb 32"})
+    EXPECT_NE(result.status().message().find(part), std::string::npos)
+        << part << " in " << result.status().to_string();
+  EXPECT_TRUE(directory_entries(dir.path()).empty());
+}
+
+// A base that fits is held outside the triangle groups: the plan reserves it.
+TEST(ScenePackerCityBase, ABaseThatFitsIsPackedExactly) {
+  PackSummary summary;
+  // Chunks of 16 K triangles cover under a third of the base's vertices, so
+  // they transform their corners; expect_round_trip streams whole copies.
+  pack_and_check({"gen:city?of=(gen:sphere?level=7)&copies=3"}, 2000, kSmallMemoryMb, &summary);
+}
+
 // Cancels (as SIGINT would) once the packer's temporary directory exists, so the
 // cancellation lands mid-pack, after data has been written.
 TEST(ScenePackerAtomicity, CancelledPackRemovesItsTemporaryDirectoryAndLeavesTheOldStore) {
