@@ -26,8 +26,6 @@ namespace outcore {
 
 namespace {
 
-// In-flight calls get this long to finish after SIGINT/SIGTERM.
-constexpr std::chrono::seconds kDrainDeadline{10};
 // While serving, a summary is logged at most this often (when anything changed).
 constexpr std::chrono::seconds kSummaryInterval{60};
 
@@ -47,6 +45,7 @@ struct ServeArgs {
   int64_t stream_gather_ms = -1;  // negative: automatic
   bool no_shared_payloads = false;
   std::string log_level = "info";
+  double drain_s = 10;  // in-flight calls' time to finish after SIGINT/SIGTERM
 };
 
 void log_summary(const server::SceneQueryService& service, const QueryEngine& engine) {
@@ -95,6 +94,12 @@ int run_serve(const ServeArgs& args) {
     return report_command_error("serve", "--stream-gather-ms must be at most 60000 (-1: automatic)");
   }
   if (args.rpc_threads < 2) return report_command_error("serve", "--rpc-threads must be at least 2");
+  if (!(args.drain_s > 0 && args.drain_s <= 3600)) {
+    return report_command_error("serve", "--drain-s must be more than 0 and at most 3600, got " +
+                                             std::to_string(args.drain_s));
+  }
+  const auto drain = std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::chrono::duration<double>(args.drain_s));
   const auto colon = args.listen.rfind(':');
   if (colon == std::string::npos || colon == 0 || colon + 1 == args.listen.size()) {
     return report_command_error("serve", "--listen '" + args.listen + "' is not HOST:PORT");
@@ -187,9 +192,9 @@ int run_serve(const ServeArgs& args) {
       last_summary = now;
     }
   }
-  spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, kDrainDeadline.count());
+  spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, args.drain_s);
   server->GetHealthCheckService()->Shutdown();  // NOT_SERVING from now on
-  server->Shutdown(std::chrono::system_clock::now() + kDrainDeadline);
+  server->Shutdown(std::chrono::system_clock::now() + drain);
   server->Wait();
   log_summary(service, **engine);
   spdlog::info("stopped");
@@ -226,6 +231,9 @@ void add_serve_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_flag("--no-shared-payloads", args->no_shared_payloads,
                 "Refuse shared-memory payloads (same-host clients then send rays and get hits over gRPC)");
+  cmd->add_option("--drain-s", args->drain_s,
+                  "After SIGINT/SIGTERM, seconds in-flight calls get to finish before they are cancelled")
+      ->capture_default_str();
   cmd->add_option("--log-level", args->log_level, "Log level")
       ->check(CLI::IsMember({"debug", "info", "warn"}))
       ->capture_default_str();
