@@ -20,6 +20,7 @@
 #include "core/cli/commands.h"
 #include "core/cli/subtree_options.h"
 #include "core/query/query_engine.h"
+#include "core/util/loopback_address.h"
 #include "server/scene_query_service.h"
 
 namespace outcore {
@@ -95,15 +96,18 @@ int run_serve(const ServeArgs& args) {
   }
   if (args.rpc_threads < 2) return report_command_error("serve", "--rpc-threads must be at least 2");
   if (!(args.drain_s > 0 && args.drain_s <= 3600)) {
-    return report_command_error("serve", "--drain-s must be more than 0 and at most 3600, got " +
-                                             std::to_string(args.drain_s));
+    return report_command_error(
+        "serve", "--drain-s must be more than 0 and at most 3600, got " + std::to_string(args.drain_s));
   }
-  const auto drain = std::chrono::duration_cast<std::chrono::milliseconds>(
-      std::chrono::duration<double>(args.drain_s));
+  const auto drain =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::duration<double>(args.drain_s));
+  // Unix sockets have no port; gRPC checks their paths.
+  const bool unix_socket = args.listen.starts_with("unix:") || args.listen.starts_with("unix-abstract:");
+  if (!unix_socket) {
+    const auto port = port_of(args.listen, 0);
+    if (!port.ok()) return report_command_error("serve", "--listen " + port.status().message());
+  }
   const auto colon = args.listen.rfind(':');
-  if (colon == std::string::npos || colon == 0 || colon + 1 == args.listen.size()) {
-    return report_command_error("serve", "--listen '" + args.listen + "' is not HOST:PORT");
-  }
 
   std::unique_ptr<tbb::global_control> threads;
   if (args.threads > 0) {
