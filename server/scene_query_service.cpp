@@ -322,10 +322,14 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
   return grpc::Status::OK;
 }
 
-grpc::Status SceneQueryService::finish(const char* method, const grpc::Status& status, uint64_t rays,
-                                       Clock::time_point start) {
+grpc::Status SceneQueryService::finish(grpc::ServerContext* context, const char* method,
+                                       const grpc::Status& status, uint64_t rays, Clock::time_point start) {
   requests_.fetch_add(1, std::memory_order_relaxed);
-  if (!status.ok()) failed_requests_.fetch_add(1, std::memory_order_relaxed);
+  // An answer the client no longer waits for (it cancelled, or the server's
+  // drain cancelled the call) was never delivered: it is no success.
+  const bool cancelled = status.error_code() == grpc::StatusCode::CANCELLED || context->IsCancelled();
+  if (!status.ok() || cancelled) failed_requests_.fetch_add(1, std::memory_order_relaxed);
+  if (cancelled) cancelled_requests_.fetch_add(1, std::memory_order_relaxed);
   if (spdlog::should_log(spdlog::level::debug)) {
     const double ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
     if (status.ok()) {
@@ -356,7 +360,7 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
       if (!pipeline.acquire_replies(group.size(), replies)) break;
       const grpc::Status status = answer_group<kKind, Response>(context, group, buffers, replies);
       for (const auto& chunk : group) {
-        finish(Traits::kStream, status, chunk->rays.size(), start);
+        finish(context, Traits::kStream, status, chunk->rays.size(), start);
       }
       if (!status.ok()) {
         tracer_status = status;
@@ -379,8 +383,8 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
     chunk->position = position;
     auto rays = check_request<kKind>(chunk->request, position, chunk->widened);
     if (!rays.ok()) {
-      status =
-          finish(Traits::kStream, to_grpc_status(rays.status()), chunk->request.batch().ray_count(), start);
+      status = finish(context, Traits::kStream, to_grpc_status(rays.status()),
+                      chunk->request.batch().ray_count(), start);
       break;
     }
     chunk->rays = *rays;
@@ -418,14 +422,14 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
 grpc::Status SceneQueryService::Intersect(grpc::ServerContext* context, const v1::QueryRequest* request,
                                           v1::IntersectResponse* response) {
   const auto start = Clock::now();
-  return finish("Intersect", answer<QueryKind::kClosestHit>(context, *request, response),
+  return finish(context, "Intersect", answer<QueryKind::kClosestHit>(context, *request, response),
                 request->batch().ray_count(), start);
 }
 
 grpc::Status SceneQueryService::Occluded(grpc::ServerContext* context, const v1::QueryRequest* request,
                                          v1::OccludedResponse* response) {
   const auto start = Clock::now();
-  return finish("Occluded", answer<QueryKind::kAnyHit>(context, *request, response),
+  return finish(context, "Occluded", answer<QueryKind::kAnyHit>(context, *request, response),
                 request->batch().ray_count(), start);
 }
 
@@ -476,6 +480,7 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   const ServiceCounters c = counters();
   response->set_requests(c.requests);
   response->set_failed_requests(c.failed_requests);
+  response->set_cancelled_requests(c.cancelled_requests);
   response->set_rays(c.rays);
   response->set_rays_hit(c.rays_hit);
   response->set_invalid_rays(c.invalid_rays);
@@ -523,6 +528,7 @@ ServiceCounters SceneQueryService::counters() const {
   ServiceCounters c;
   c.requests = requests_.load(std::memory_order_relaxed);
   c.failed_requests = failed_requests_.load(std::memory_order_relaxed);
+  c.cancelled_requests = cancelled_requests_.load(std::memory_order_relaxed);
   c.rays = rays_.load(std::memory_order_relaxed);
   c.rays_hit = rays_hit_.load(std::memory_order_relaxed);
   c.invalid_rays = invalid_rays_.load(std::memory_order_relaxed);

@@ -10,10 +10,12 @@
 //
 // Deadlines and cancellation are checked before each batch is traced (unary)
 // and between engine calls (streams); a batch already being traced runs to
-// its end. Each stream chunk is answered by one reply, in order, echoing its
-// sequence; the first bad chunk ends the stream with its error. A stream is
-// read, traced and written by three threads (stream_pipeline.h), and chunks
-// that queued up while the engine was busy are traced in one engine call.
+// its end, unless the engine's cancellation stops it (the server's drain
+// after SIGTERM, serve_command.h). Each stream chunk is answered by one
+// reply, in order, echoing its sequence; the first bad chunk ends the stream
+// with its error. A stream is read, traced and written by three threads
+// (stream_pipeline.h), and chunks that queued up while the engine was busy
+// are traced in one engine call.
 //
 // Thread-safety: all handlers may run concurrently (gRPC's sync server calls
 // them from its thread pool); counters are atomics, the engine is thread-safe.
@@ -74,8 +76,9 @@ inline constexpr uint64_t kGroupRaysPerBrick = 1024;
 
 // Server-wide figures since start (a snapshot of the atomics).
 struct ServiceCounters {
-  uint64_t requests = 0;  // unary calls + stream chunks answered or refused
-  uint64_t failed_requests = 0;
+  uint64_t requests = 0;            // unary calls + stream chunks answered or refused
+  uint64_t failed_requests = 0;     // cancelled ones included
+  uint64_t cancelled_requests = 0;  // by the client, or by the drain after SIGTERM
   uint64_t rays = 0;
   uint64_t rays_hit = 0;
   uint64_t invalid_rays = 0;
@@ -155,13 +158,14 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   grpc::Status serve_stream(grpc::ServerContext* context,
                             grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream);
   // Counts one answered request and logs it at debug level.
-  grpc::Status finish(const char* method, const grpc::Status& status, uint64_t rays,
-                      std::chrono::steady_clock::time_point start);
+  grpc::Status finish(grpc::ServerContext* context, const char* method, const grpc::Status& status,
+                      uint64_t rays, std::chrono::steady_clock::time_point start);
 
   QueryEngine& engine_;
   const ServiceOptions options_;  // max_group_rays resolved (never 0)
   std::atomic<uint64_t> requests_{0};
   std::atomic<uint64_t> failed_requests_{0};
+  std::atomic<uint64_t> cancelled_requests_{0};
   std::atomic<uint64_t> rays_{0};
   std::atomic<uint64_t> rays_hit_{0};
   std::atomic<uint64_t> invalid_rays_{0};

@@ -11,15 +11,20 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "core/cli/commands.h"
 #include "core/cli/subtree_options.h"
 #include "core/query/query_engine.h"
+#include "core/util/cancellation.h"
 #include "core/util/loopback_address.h"
 #include "server/scene_query_service.h"
 
@@ -27,6 +32,10 @@ namespace outcore {
 
 namespace {
 
+// Once the drain bound has passed and in-flight batches were cancelled, calls
+// get this long to end before the process exits without them: a cancelled
+// batch stops at its next brick, well within it.
+constexpr std::chrono::seconds kCancelGrace{1};
 // While serving, a summary is logged at most this often (when anything changed).
 constexpr std::chrono::seconds kSummaryInterval{60};
 
@@ -53,11 +62,12 @@ void log_summary(const server::SceneQueryService& service, const QueryEngine& en
   const server::ServiceCounters c = service.counters();
   const CacheCounters cache = engine.cache().counters();
   spdlog::info(
-      "{} requests ({} failed), {} rays ({} hit, {} invalid), {:.3f} s tracing; cache: {} hits, {} misses, "
-      "{} builds, {} evictions, {} bricks / {} bytes resident (peak {}, budget {})",
-      c.requests, c.failed_requests, c.rays, c.rays_hit, c.invalid_rays, c.seconds_tracing, cache.hits,
-      cache.misses, cache.builds, cache.evictions, cache.resident_bricks, cache.resident_bytes,
-      cache.peak_resident_bytes, engine.cache().budget_bytes());
+      "{} requests ({} failed, {} cancelled), {} rays ({} hit, {} invalid), {:.3f} s tracing; cache: {} "
+      "hits, "
+      "{} misses, {} builds, {} evictions, {} bricks / {} bytes resident (peak {}, budget {})",
+      c.requests, c.failed_requests, c.cancelled_requests, c.rays, c.rays_hit, c.invalid_rays,
+      c.seconds_tracing, cache.hits, cache.misses, cache.builds, cache.evictions, cache.resident_bricks,
+      cache.resident_bytes, cache.peak_resident_bytes, engine.cache().budget_bytes());
   if (engine.cache().subtree_tier() != nullptr) {
     const SubtreeTierCounters& t = cache.subtree;
     spdlog::info("subtree tier: {} loads ({:.3f} s), {} writes, {} rejected, {} files / {} bytes on disk",
@@ -198,8 +208,37 @@ int run_serve(const ServeArgs& args) {
   }
   spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, args.drain_s);
   server->GetHealthCheckService()->Shutdown();  // NOT_SERVING from now on
-  server->Shutdown(std::chrono::system_clock::now() + drain);
-  server->Wait();
+  // gRPC cancels the calls still running at the deadline, but waits for their
+  // handlers to return, and a handler inside the engine returns only when its
+  // batch ends. So this thread watches the bound: past it, the engine's
+  // batches are cancelled, and past the grace the process exits regardless.
+  const auto drain_end = std::chrono::steady_clock::now() + drain;
+  std::mutex stop_mutex;
+  std::condition_variable stop_done;
+  bool stopped = false;
+  std::thread stopper([&] {
+    server->Shutdown(std::chrono::system_clock::now() + drain);
+    server->Wait();
+    std::lock_guard lock(stop_mutex);
+    stopped = true;
+    stop_done.notify_all();
+  });
+  {
+    std::unique_lock lock(stop_mutex);
+    if (!stop_done.wait_until(lock, drain_end, [&] { return stopped; })) {
+      spdlog::warn("drain bound of {} s passed with calls in flight: cancelling their batches", args.drain_s);
+      request_cancel();
+      if (!stop_done.wait_until(lock, drain_end + kCancelGrace, [&] { return stopped; })) {
+        log_summary(service, **engine);
+        spdlog::error("calls still running {} s after the drain bound; exiting without them",
+                      kCancelGrace.count());
+        spdlog::default_logger()->flush();
+        std::fflush(nullptr);
+        std::_Exit(1);
+      }
+    }
+  }
+  stopper.join();
   log_summary(service, **engine);
   spdlog::info("stopped");
   return 0;

@@ -899,5 +899,51 @@ TEST_F(ServerApi, SigintDrainsAnInFlightStreamAndExitsZero) {
   expect_signal_drains(store_, SIGINT, chunk, hit_bytes(serial_hits(chunk)));
 }
 
+// The drain after SIGTERM is bounded: a batch still being traced when the
+// bound passes is cancelled through the engine (the client gets an error, the
+// log counts the request as cancelled and failed) and the process exits
+// within the bound plus a little. The batch thrashes a small cache ray by ray
+// (no_reorder), which takes far longer than the test.
+TEST(ServerDrain, ABatchStillTracedWhenTheDrainBoundPassesIsCancelledAndTheServerExitsInTime) {
+  TempDir dir;
+  const std::string store = dir.file("scene");
+  const SubprocessResult packed = testing::run_outcore(
+      {"pack", "gen:sphere?level=6", "-o", store, "--brick-tris", "64", "-q", "--no-sync"},
+      std::chrono::milliseconds(120'000));
+  ASSERT_TRUE(packed.succeeded()) << packed.describe();
+  constexpr double kDrainSeconds = 2;
+  std::string error;
+  auto server = ServerProcess::start(store, {"--cache-mb", "1", "--drain-s", "2", "--threads", "1"}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto opened = SceneStore::open(store);
+  ASSERT_TRUE(opened.ok()) << opened.status().to_string();
+  const std::vector<Ray> r = testing::make_test_rays((*opened)->manifest().bounds, 400'000, 8);
+  v1::QueryRequest request = make_request(r);
+  request.set_no_reorder(true);
+
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(-1);
+  arguments.SetMaxSendMessageSize(-1);
+  auto stub = v1::SceneQuery::NewStub(
+      grpc::CreateCustomChannel(server->address(), grpc::InsecureChannelCredentials(), arguments));
+  grpc::Status long_call;
+  std::thread caller([&] {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    v1::IntersectResponse response;
+    long_call = stub->Intersect(&context, request, &response);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the batch is being traced
+  const auto signalled = std::chrono::steady_clock::now();
+  const int exit_code = server->stop(SIGTERM, std::chrono::seconds(12));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
+  caller.join();
+  EXPECT_EQ(exit_code, 0) << server->log();
+  EXPECT_LT(seconds, kDrainSeconds + 1.5) << server->log();
+  EXPECT_FALSE(long_call.ok()) << "the cancelled batch was answered";
+  const std::string log = server->log();
+  EXPECT_TRUE(contains(log, "1 requests (1 failed, 1 cancelled)")) << log;
+}
+
 }  // namespace
 }  // namespace outcore
