@@ -433,6 +433,51 @@ grpc::Status SceneQueryService::Occluded(grpc::ServerContext* context, const v1:
                 request->batch().ray_count(), start);
 }
 
+template <class Response, class Handler>
+grpc::Status SceneQueryService::serve_unary(grpc::ServerContext* context,
+                                            grpc::ServerUnaryStreamer<v1::QueryRequest, Response>* streamer,
+                                            const char* method, const Handler& handler) {
+  v1::QueryRequest request;
+  if (!streamer->Read(&request)) {
+    if (context->IsCancelled()) {
+      return finish(context, method, grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client"), 0,
+                    Clock::now());
+    }
+    return finish(
+        context, method,
+        grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, std::string("the request could not be parsed as ") +
+                                                             v1::QueryRequest::descriptor()->full_name() +
+                                                             " (malformed protobuf bytes, or no message)"),
+        0, Clock::now());
+  }
+  Response response;
+  const grpc::Status status = handler(&request, &response);
+  if (!status.ok()) return status;
+  // The reply goes out with the status, as a unary call's does.
+  if (!streamer->Write(response, grpc::WriteOptions().set_last_message())) {
+    return grpc::Status(grpc::StatusCode::CANCELLED, "the client went away before the reply was written");
+  }
+  return grpc::Status::OK;
+}
+
+grpc::Status SceneQueryService::StreamedIntersect(
+    grpc::ServerContext* context,
+    grpc::ServerUnaryStreamer<v1::QueryRequest, v1::IntersectResponse>* streamer) {
+  return serve_unary(context, streamer, "Intersect",
+                     [&](const v1::QueryRequest* request, v1::IntersectResponse* response) {
+                       return Intersect(context, request, response);
+                     });
+}
+
+grpc::Status SceneQueryService::StreamedOccluded(
+    grpc::ServerContext* context,
+    grpc::ServerUnaryStreamer<v1::QueryRequest, v1::OccludedResponse>* streamer) {
+  return serve_unary(context, streamer, "Occluded",
+                     [&](const v1::QueryRequest* request, v1::OccludedResponse* response) {
+                       return Occluded(context, request, response);
+                     });
+}
+
 grpc::Status SceneQueryService::IntersectStream(
     grpc::ServerContext* context, grpc::ServerReaderWriter<v1::IntersectResponse, v1::QueryRequest>* stream) {
   return serve_stream<QueryKind::kClosestHit>(context, stream);

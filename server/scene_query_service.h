@@ -91,9 +91,23 @@ struct ServiceCounters {
   uint64_t rays_in_brick_set = 0;
 };
 
-class SceneQueryService final : public v1::SceneQuery::Service {
+// The unary calls are registered as gRPC's "streamed unary" methods: the
+// handler reads the request itself, so bytes that do not parse are answered
+// INVALID_ARGUMENT naming the message type (gRPC's generated handler answers
+// them INTERNAL with no message). One message each way, as before.
+using SceneQueryBase = v1::SceneQuery::WithStreamedUnaryMethod_Intersect<
+    v1::SceneQuery::WithStreamedUnaryMethod_Occluded<v1::SceneQuery::Service>>;
+
+class SceneQueryService final : public SceneQueryBase {
  public:
   SceneQueryService(QueryEngine& engine, const ServiceOptions& options);
+
+  grpc::Status StreamedIntersect(
+      grpc::ServerContext* context,
+      grpc::ServerUnaryStreamer<v1::QueryRequest, v1::IntersectResponse>* streamer) override;
+  grpc::Status StreamedOccluded(
+      grpc::ServerContext* context,
+      grpc::ServerUnaryStreamer<v1::QueryRequest, v1::OccludedResponse>* streamer) override;
 
   grpc::Status Intersect(grpc::ServerContext* context, const v1::QueryRequest* request,
                          v1::IntersectResponse* response) override;
@@ -157,6 +171,12 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   template <QueryKind kKind, class Response>
   grpc::Status serve_stream(grpc::ServerContext* context,
                             grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream);
+  // Reads a unary call's request (INVALID_ARGUMENT when its bytes do not
+  // parse), answers it with `handler` and writes the reply.
+  template <class Response, class Handler>
+  grpc::Status serve_unary(grpc::ServerContext* context,
+                           grpc::ServerUnaryStreamer<v1::QueryRequest, Response>* streamer,
+                           const char* method, const Handler& handler);
   // Counts one answered request and logs it at debug level.
   grpc::Status finish(grpc::ServerContext* context, const char* method, const grpc::Status& status,
                       uint64_t rays, std::chrono::steady_clock::time_point start);
