@@ -548,6 +548,10 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   response->set_cache_budget_bytes(engine_.cache().budget_bytes());
   response->set_eviction_policy(engine_.cache().policy().name());
   response->set_proxy_bytes(engine_.proxies() != nullptr ? engine_.proxies()->memory_bytes() : 0);
+  {
+    std::lock_guard lock(store_changed_mutex_);
+    response->set_store_changed(store_changed_);
+  }
   if (const SubtreeTier* tier = engine_.cache().subtree_tier()) {
     const SubtreeTierCounters& t = cache.subtree;
     response->set_subtree_dir(tier->options().directory);
@@ -567,6 +571,21 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
     response->set_subtree_write_seconds(t.write_seconds);
   }
   return grpc::Status::OK;
+}
+
+void SceneQueryService::check_store() {
+  {
+    std::lock_guard lock(store_changed_mutex_);
+    if (!store_changed_.empty()) return;  // said once; the scene served stays the same
+  }
+  const Status status = engine_.store().check_unchanged_on_disk();
+  if (status.ok()) return;
+  const std::string what =
+      status.message() +
+      "; this server goes on serving the scene it opened (restart it to serve the new one)";
+  spdlog::warn("{}", what);
+  std::lock_guard lock(store_changed_mutex_);
+  store_changed_ = what;
 }
 
 ServiceCounters SceneQueryService::counters() const {

@@ -126,6 +126,13 @@ class SceneQueryService final : public SceneQueryBase {
 
   ServiceCounters counters() const;
 
+  // Checks that the store on disk is still the one the engine opened (two
+  // stat calls; the server's main loop calls it once a second). The first
+  // time it is not (replaced by pack --force, or removed), logs a warning
+  // naming it, and GetStats.store_changed says so from then on. The engine
+  // goes on answering from the scene it opened, whole (scene_store.h).
+  void check_store();
+
  private:
   // A stream group's gathered rays and answers, reused across groups.
   struct GroupBuffers {
@@ -197,6 +204,8 @@ class SceneQueryService final : public SceneQueryBase {
   std::atomic<uint64_t> rays_in_brick_set_{0};
   std::mutex shared_buffers_mutex_;
   std::vector<std::unique_ptr<SharedBuffers>> spare_shared_buffers_;  // at most two
+  std::mutex store_changed_mutex_;
+  std::string store_changed_;  // empty while the store on disk is the one opened
   // Client objects of recent shared calls, kept mapped (shared_mapping_cache.h).
   SharedMappingCache shared_mappings_;
 };

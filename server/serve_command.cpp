@@ -198,6 +198,7 @@ int run_serve(const ServeArgs& args) {
   while (signal_number <= 0) {
     const timespec tick{1, 0};
     signal_number = sigtimedwait(&stop_signals, nullptr, &tick);
+    if (signal_number <= 0) service.check_store();
     const auto now = std::chrono::steady_clock::now();
     if (signal_number <= 0 && now - last_summary >= kSummaryInterval) {
       const uint64_t requests = service.counters().requests;

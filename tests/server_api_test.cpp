@@ -945,5 +945,64 @@ TEST(ServerDrain, ABatchStillTracedWhenTheDrainBoundPassesIsCancelledAndTheServe
   EXPECT_TRUE(contains(log, "1 requests (1 failed, 1 cancelled)")) << log;
 }
 
+// `pack --force` may replace the store under a running server. The server
+// goes on answering from the scene it opened (it holds its files open, so
+// never a mix of both), and says so: one warning in its log and
+// GetStats.store_changed, both naming the store.
+TEST(ServerStoreReplaced, AServerWhoseStoreWasRepackedSaysSoAndKeepsServingTheSceneItOpened) {
+  TempDir dir;
+  const std::string store = dir.file("scene");
+  const auto pack = [&](const std::string& input) {
+    const SubprocessResult packed = testing::run_outcore(
+        {"pack", input, "-o", store, "--force", "--brick-tris", "200", "-q", "--no-sync"},
+        std::chrono::milliseconds(120'000));
+    ASSERT_TRUE(packed.succeeded()) << packed.describe();
+  };
+  pack("gen:sphere?level=3");
+  std::string error;
+  auto server = ServerProcess::start(store, {}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto opened = SceneStore::open(store);
+  ASSERT_TRUE(opened.ok()) << opened.status().to_string();
+  const std::vector<Ray> r = testing::make_test_rays((*opened)->manifest().bounds, 5000, 12);
+  opened->reset();
+  auto stub =
+      v1::SceneQuery::NewStub(grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  const auto query = [&] {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    v1::IntersectResponse response;
+    const grpc::Status status = stub->Intersect(&context, make_request(r), &response);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return response.hits();
+  };
+  const auto changed = [&] {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    v1::ServerStats stats;
+    EXPECT_TRUE(stub->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
+    return stats.store_changed();
+  };
+  const std::string before = query();
+  EXPECT_EQ(changed(), "");
+
+  pack("gen:torus?major=0.7&minor=0.3");
+  std::string why;
+  for (int i = 0; i < 40 && why.empty(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    why = changed();
+  }
+  EXPECT_TRUE(contains(why, store)) << why;
+  EXPECT_TRUE(contains(why, "replaced")) << why;
+  EXPECT_TRUE(query() == before) << "the server answered from another scene than the one it opened";
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  EXPECT_TRUE(query() == before);
+  const std::string log = server->log();
+  EXPECT_EQ(testing::count_of(log, "was replaced"), 1u) << log;
+  EXPECT_TRUE(contains(log, store)) << log;
+  stub.reset();
+  EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
+}
+
 }  // namespace
 }  // namespace outcore
