@@ -1,5 +1,7 @@
 #include "server/scene_query_service.h"
 
+#include <grpcpp/support/byte_buffer.h>
+#include <grpcpp/support/method_handler.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -84,6 +86,27 @@ ServiceOptions resolve(const ServiceOptions& options, const QueryEngine& engine)
 
 SceneQueryService::SceneQueryService(QueryEngine& engine, const ServiceOptions& options)
     : engine_(engine), options_(resolve(options, engine)) {
+  // The streams' handlers read bytes (serve_stream). Methods are numbered in
+  // the order of scene_query.proto's service block, as the generated code's
+  // WithStreamedUnaryMethod_* number Intersect 0 and Occluded 1.
+  constexpr int kIntersectStreamMethod = 2;
+  constexpr int kOccludedStreamMethod = 3;
+  MarkMethodStreamed(
+      kIntersectStreamMethod,
+      new grpc::internal::BidiStreamingHandler<SceneQueryService, grpc::ByteBuffer, v1::IntersectResponse>(
+          [](SceneQueryService* service, grpc::ServerContext* context,
+             grpc::ServerReaderWriter<v1::IntersectResponse, grpc::ByteBuffer>* stream) {
+            return service->serve_stream<QueryKind::kClosestHit>(context, stream);
+          },
+          this));
+  MarkMethodStreamed(
+      kOccludedStreamMethod,
+      new grpc::internal::BidiStreamingHandler<SceneQueryService, grpc::ByteBuffer, v1::OccludedResponse>(
+          [](SceneQueryService* service, grpc::ServerContext* context,
+             grpc::ServerReaderWriter<v1::OccludedResponse, grpc::ByteBuffer>* stream) {
+            return service->serve_stream<QueryKind::kAnyHit>(context, stream);
+          },
+          this));
   spdlog::debug("streams: chunks traced together up to {} rays, gathered while at most {} ms apart",
                 options_.max_group_rays, options_.gather_wait_ms);
 }
@@ -344,11 +367,11 @@ grpc::Status SceneQueryService::finish(grpc::ServerContext* context, const char*
 
 template <QueryKind kKind, class Response>
 grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
-                                             grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream) {
+                                             grpc::ServerReaderWriter<Response, grpc::ByteBuffer>* stream) {
   using Traits = KindTraits<kKind>;
   const auto stream_start = Clock::now();
-  StreamPipeline<Response> pipeline(stream, options_.max_group_rays,
-                                    std::chrono::milliseconds(options_.gather_wait_ms));
+  StreamPipeline<Response, grpc::ServerReaderWriter<Response, grpc::ByteBuffer>> pipeline(
+      stream, options_.max_group_rays, std::chrono::milliseconds(options_.gather_wait_ms));
   // The tracer's first error; read once the tracer has been joined.
   grpc::Status tracer_status = grpc::Status::OK;
   pipeline.start([&] {
@@ -375,10 +398,20 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
   BatchPosition position;
   position.streamed = true;
   grpc::Status status = grpc::Status::OK;
+  grpc::ByteBuffer bytes;
   for (;;) {
     std::unique_ptr<StreamChunk> chunk = pipeline.spare_chunk();
     const auto start = Clock::now();
-    if (!stream->Read(&chunk->request)) break;
+    if (!stream->Read(&bytes)) break;
+    if (!grpc::SerializationTraits<v1::QueryRequest>::Deserialize(&bytes, &chunk->request).ok()) {
+      status = finish(
+          context, Traits::kStream,
+          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, where(position) + " could not be parsed as " +
+                                                               v1::QueryRequest::descriptor()->full_name() +
+                                                               " (malformed protobuf bytes)"),
+          0, start);
+      break;
+    }
     pipeline.add_reading_time(std::chrono::duration<double>(Clock::now() - start).count());
     chunk->position = position;
     auto rays = check_request<kKind>(chunk->request, position, chunk->widened);
@@ -476,16 +509,6 @@ grpc::Status SceneQueryService::StreamedOccluded(
                      [&](const v1::QueryRequest* request, v1::OccludedResponse* response) {
                        return Occluded(context, request, response);
                      });
-}
-
-grpc::Status SceneQueryService::IntersectStream(
-    grpc::ServerContext* context, grpc::ServerReaderWriter<v1::IntersectResponse, v1::QueryRequest>* stream) {
-  return serve_stream<QueryKind::kClosestHit>(context, stream);
-}
-
-grpc::Status SceneQueryService::OccludedStream(
-    grpc::ServerContext* context, grpc::ServerReaderWriter<v1::OccludedResponse, v1::QueryRequest>* stream) {
-  return serve_stream<QueryKind::kAnyHit>(context, stream);
 }
 
 grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext*, const v1::GetSceneInfoRequest*,

@@ -94,7 +94,8 @@ struct ServiceCounters {
 // The unary calls are registered as gRPC's "streamed unary" methods: the
 // handler reads the request itself, so bytes that do not parse are answered
 // INVALID_ARGUMENT naming the message type (gRPC's generated handler answers
-// them INTERNAL with no message). One message each way, as before.
+// them INTERNAL with no message). One message each way, as before. The
+// streams' handlers are replaced likewise (constructor) to read bytes.
 using SceneQueryBase = v1::SceneQuery::WithStreamedUnaryMethod_Intersect<
     v1::SceneQuery::WithStreamedUnaryMethod_Occluded<v1::SceneQuery::Service>>;
 
@@ -113,12 +114,6 @@ class SceneQueryService final : public SceneQueryBase {
                          v1::IntersectResponse* response) override;
   grpc::Status Occluded(grpc::ServerContext* context, const v1::QueryRequest* request,
                         v1::OccludedResponse* response) override;
-  grpc::Status IntersectStream(
-      grpc::ServerContext* context,
-      grpc::ServerReaderWriter<v1::IntersectResponse, v1::QueryRequest>* stream) override;
-  grpc::Status OccludedStream(
-      grpc::ServerContext* context,
-      grpc::ServerReaderWriter<v1::OccludedResponse, v1::QueryRequest>* stream) override;
   grpc::Status GetSceneInfo(grpc::ServerContext* context, const v1::GetSceneInfoRequest* request,
                             v1::SceneInfo* response) override;
   grpc::Status GetStats(grpc::ServerContext* context, const v1::GetStatsRequest* request,
@@ -175,9 +170,12 @@ class SceneQueryService final : public SceneQueryBase {
   template <QueryKind kKind, class Response>
   grpc::Status answer_group(grpc::ServerContext* context, std::span<const std::unique_ptr<StreamChunk>> group,
                             GroupBuffers& buffers, std::span<const std::unique_ptr<Response>> replies);
+  // IntersectStream / OccludedStream. Chunks arrive as bytes and are parsed
+  // here: gRPC's typed Read() reports bytes that do not parse as the end of
+  // the stream, which would end it OK with the chunk unanswered.
   template <QueryKind kKind, class Response>
   grpc::Status serve_stream(grpc::ServerContext* context,
-                            grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream);
+                            grpc::ServerReaderWriter<Response, grpc::ByteBuffer>* stream);
   // Reads a unary call's request (INVALID_ARGUMENT when its bytes do not
   // parse), answers it with `handler` and writes the reply.
   template <class Response, class Handler>
