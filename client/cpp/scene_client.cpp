@@ -283,8 +283,10 @@ Status check_target_ports(const std::string& address) {
   std::string_view target = address;
   const auto check = [&](std::string_view host_port) -> Status {
     const auto port = port_of(host_port, 1);
-    if (!port.ok()) return invalid_argument("server address '" + address + "': " + port.status().message());
-    return Status::Ok();
+    if (port.ok()) return Status::Ok();
+    // The message quotes host_port; the whole target too when it is more.
+    if (host_port == address) return invalid_argument("server address " + port.status().message());
+    return invalid_argument("server address '" + address + "': " + port.status().message());
   };
   if (target.starts_with("ipv4:") || target.starts_with("ipv6:")) {
     target.remove_prefix(5);
@@ -304,7 +306,8 @@ Status check_target_ports(const std::string& address) {
     }
     return check(target);
   }
-  // Other schemes (unix:, ...) name no port; a bare HOST:PORT does.
+  // "name:rest" with a non-numeric rest is another scheme's target (unix:/path,
+  // ...), with no port to check; "host:digits" is a bare HOST:PORT.
   const auto colon = target.find(':');
   const bool scheme = colon != std::string_view::npos && !target.starts_with("[") &&
                       target.find_first_not_of("abcdefghijklmnopqrstuvwxyz-") == colon &&
