@@ -1,5 +1,7 @@
 #include "server/scene_query_service.h"
 
+#include <grpcpp/support/byte_buffer.h>
+#include <grpcpp/support/method_handler.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -84,6 +86,27 @@ ServiceOptions resolve(const ServiceOptions& options, const QueryEngine& engine)
 
 SceneQueryService::SceneQueryService(QueryEngine& engine, const ServiceOptions& options)
     : engine_(engine), options_(resolve(options, engine)) {
+  // The streams' handlers read bytes (serve_stream). Methods are numbered in
+  // the order of scene_query.proto's service block, as the generated code's
+  // WithStreamedUnaryMethod_* number Intersect 0 and Occluded 1.
+  constexpr int kIntersectStreamMethod = 2;
+  constexpr int kOccludedStreamMethod = 3;
+  MarkMethodStreamed(
+      kIntersectStreamMethod,
+      new grpc::internal::BidiStreamingHandler<SceneQueryService, grpc::ByteBuffer, v1::IntersectResponse>(
+          [](SceneQueryService* service, grpc::ServerContext* context,
+             grpc::ServerReaderWriter<v1::IntersectResponse, grpc::ByteBuffer>* stream) {
+            return service->serve_stream<QueryKind::kClosestHit>(context, stream);
+          },
+          this));
+  MarkMethodStreamed(
+      kOccludedStreamMethod,
+      new grpc::internal::BidiStreamingHandler<SceneQueryService, grpc::ByteBuffer, v1::OccludedResponse>(
+          [](SceneQueryService* service, grpc::ServerContext* context,
+             grpc::ServerReaderWriter<v1::OccludedResponse, grpc::ByteBuffer>* stream) {
+            return service->serve_stream<QueryKind::kAnyHit>(context, stream);
+          },
+          this));
   spdlog::debug("streams: chunks traced together up to {} rays, gathered while at most {} ms apart",
                 options_.max_group_rays, options_.gather_wait_ms);
 }
@@ -322,10 +345,14 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
   return grpc::Status::OK;
 }
 
-grpc::Status SceneQueryService::finish(const char* method, const grpc::Status& status, uint64_t rays,
-                                       Clock::time_point start) {
+grpc::Status SceneQueryService::finish(grpc::ServerContext* context, const char* method,
+                                       const grpc::Status& status, uint64_t rays, Clock::time_point start) {
   requests_.fetch_add(1, std::memory_order_relaxed);
-  if (!status.ok()) failed_requests_.fetch_add(1, std::memory_order_relaxed);
+  // An answer the client no longer waits for (it cancelled, or the server's
+  // drain cancelled the call) was never delivered: it is no success.
+  const bool cancelled = status.error_code() == grpc::StatusCode::CANCELLED || context->IsCancelled();
+  if (!status.ok() || cancelled) failed_requests_.fetch_add(1, std::memory_order_relaxed);
+  if (cancelled) cancelled_requests_.fetch_add(1, std::memory_order_relaxed);
   if (spdlog::should_log(spdlog::level::debug)) {
     const double ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
     if (status.ok()) {
@@ -340,11 +367,11 @@ grpc::Status SceneQueryService::finish(const char* method, const grpc::Status& s
 
 template <QueryKind kKind, class Response>
 grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
-                                             grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream) {
+                                             grpc::ServerReaderWriter<Response, grpc::ByteBuffer>* stream) {
   using Traits = KindTraits<kKind>;
   const auto stream_start = Clock::now();
-  StreamPipeline<Response> pipeline(stream, options_.max_group_rays,
-                                    std::chrono::milliseconds(options_.gather_wait_ms));
+  StreamPipeline<Response, grpc::ServerReaderWriter<Response, grpc::ByteBuffer>> pipeline(
+      stream, options_.max_group_rays, std::chrono::milliseconds(options_.gather_wait_ms));
   // The tracer's first error; read once the tracer has been joined.
   grpc::Status tracer_status = grpc::Status::OK;
   pipeline.start([&] {
@@ -356,7 +383,7 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
       if (!pipeline.acquire_replies(group.size(), replies)) break;
       const grpc::Status status = answer_group<kKind, Response>(context, group, buffers, replies);
       for (const auto& chunk : group) {
-        finish(Traits::kStream, status, chunk->rays.size(), start);
+        finish(context, Traits::kStream, status, chunk->rays.size(), start);
       }
       if (!status.ok()) {
         tracer_status = status;
@@ -371,16 +398,26 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
   BatchPosition position;
   position.streamed = true;
   grpc::Status status = grpc::Status::OK;
+  grpc::ByteBuffer bytes;
   for (;;) {
     std::unique_ptr<StreamChunk> chunk = pipeline.spare_chunk();
     const auto start = Clock::now();
-    if (!stream->Read(&chunk->request)) break;
+    if (!stream->Read(&bytes)) break;
+    if (!grpc::SerializationTraits<v1::QueryRequest>::Deserialize(&bytes, &chunk->request).ok()) {
+      status = finish(
+          context, Traits::kStream,
+          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, where(position) + " could not be parsed as " +
+                                                               v1::QueryRequest::descriptor()->full_name() +
+                                                               " (malformed protobuf bytes)"),
+          0, start);
+      break;
+    }
     pipeline.add_reading_time(std::chrono::duration<double>(Clock::now() - start).count());
     chunk->position = position;
     auto rays = check_request<kKind>(chunk->request, position, chunk->widened);
     if (!rays.ok()) {
-      status =
-          finish(Traits::kStream, to_grpc_status(rays.status()), chunk->request.batch().ray_count(), start);
+      status = finish(context, Traits::kStream, to_grpc_status(rays.status()),
+                      chunk->request.batch().ray_count(), start);
       break;
     }
     chunk->rays = *rays;
@@ -418,25 +455,60 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
 grpc::Status SceneQueryService::Intersect(grpc::ServerContext* context, const v1::QueryRequest* request,
                                           v1::IntersectResponse* response) {
   const auto start = Clock::now();
-  return finish("Intersect", answer<QueryKind::kClosestHit>(context, *request, response),
+  return finish(context, "Intersect", answer<QueryKind::kClosestHit>(context, *request, response),
                 request->batch().ray_count(), start);
 }
 
 grpc::Status SceneQueryService::Occluded(grpc::ServerContext* context, const v1::QueryRequest* request,
                                          v1::OccludedResponse* response) {
   const auto start = Clock::now();
-  return finish("Occluded", answer<QueryKind::kAnyHit>(context, *request, response),
+  return finish(context, "Occluded", answer<QueryKind::kAnyHit>(context, *request, response),
                 request->batch().ray_count(), start);
 }
 
-grpc::Status SceneQueryService::IntersectStream(
-    grpc::ServerContext* context, grpc::ServerReaderWriter<v1::IntersectResponse, v1::QueryRequest>* stream) {
-  return serve_stream<QueryKind::kClosestHit>(context, stream);
+template <class Response, class Handler>
+grpc::Status SceneQueryService::serve_unary(grpc::ServerContext* context,
+                                            grpc::ServerUnaryStreamer<v1::QueryRequest, Response>* streamer,
+                                            const char* method, const Handler& handler) {
+  v1::QueryRequest request;
+  if (!streamer->Read(&request)) {
+    if (context->IsCancelled()) {
+      return finish(context, method, grpc::Status(grpc::StatusCode::CANCELLED, "cancelled by the client"), 0,
+                    Clock::now());
+    }
+    return finish(
+        context, method,
+        grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, std::string("the request could not be parsed as ") +
+                                                             v1::QueryRequest::descriptor()->full_name() +
+                                                             " (malformed protobuf bytes, or no message)"),
+        0, Clock::now());
+  }
+  Response response;
+  const grpc::Status status = handler(&request, &response);
+  if (!status.ok()) return status;
+  // The reply goes out with the status, as a unary call's does.
+  if (!streamer->Write(response, grpc::WriteOptions().set_last_message())) {
+    return grpc::Status(grpc::StatusCode::CANCELLED, "the client went away before the reply was written");
+  }
+  return grpc::Status::OK;
 }
 
-grpc::Status SceneQueryService::OccludedStream(
-    grpc::ServerContext* context, grpc::ServerReaderWriter<v1::OccludedResponse, v1::QueryRequest>* stream) {
-  return serve_stream<QueryKind::kAnyHit>(context, stream);
+grpc::Status SceneQueryService::StreamedIntersect(
+    grpc::ServerContext* context,
+    grpc::ServerUnaryStreamer<v1::QueryRequest, v1::IntersectResponse>* streamer) {
+  return serve_unary(context, streamer, "Intersect",
+                     [&](const v1::QueryRequest* request, v1::IntersectResponse* response) {
+                       return Intersect(context, request, response);
+                     });
+}
+
+grpc::Status SceneQueryService::StreamedOccluded(
+    grpc::ServerContext* context,
+    grpc::ServerUnaryStreamer<v1::QueryRequest, v1::OccludedResponse>* streamer) {
+  return serve_unary(context, streamer, "Occluded",
+                     [&](const v1::QueryRequest* request, v1::OccludedResponse* response) {
+                       return Occluded(context, request, response);
+                     });
 }
 
 grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext*, const v1::GetSceneInfoRequest*,
@@ -476,6 +548,7 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   const ServiceCounters c = counters();
   response->set_requests(c.requests);
   response->set_failed_requests(c.failed_requests);
+  response->set_cancelled_requests(c.cancelled_requests);
   response->set_rays(c.rays);
   response->set_rays_hit(c.rays_hit);
   response->set_invalid_rays(c.invalid_rays);
@@ -498,6 +571,10 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   response->set_cache_budget_bytes(engine_.cache().budget_bytes());
   response->set_eviction_policy(engine_.cache().policy().name());
   response->set_proxy_bytes(engine_.proxies() != nullptr ? engine_.proxies()->memory_bytes() : 0);
+  {
+    std::lock_guard lock(store_changed_mutex_);
+    response->set_store_changed(store_changed_);
+  }
   if (const SubtreeTier* tier = engine_.cache().subtree_tier()) {
     const SubtreeTierCounters& t = cache.subtree;
     response->set_subtree_dir(tier->options().directory);
@@ -519,10 +596,26 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   return grpc::Status::OK;
 }
 
+void SceneQueryService::check_store() {
+  {
+    std::lock_guard lock(store_changed_mutex_);
+    if (!store_changed_.empty()) return;  // said once; the scene served stays the same
+  }
+  const Status status = engine_.store().check_unchanged_on_disk();
+  if (status.ok()) return;
+  const std::string what =
+      status.message() +
+      "; this server goes on serving the scene it opened (restart it to serve the new one)";
+  spdlog::warn("{}", what);
+  std::lock_guard lock(store_changed_mutex_);
+  store_changed_ = what;
+}
+
 ServiceCounters SceneQueryService::counters() const {
   ServiceCounters c;
   c.requests = requests_.load(std::memory_order_relaxed);
   c.failed_requests = failed_requests_.load(std::memory_order_relaxed);
+  c.cancelled_requests = cancelled_requests_.load(std::memory_order_relaxed);
   c.rays = rays_.load(std::memory_order_relaxed);
   c.rays_hit = rays_hit_.load(std::memory_order_relaxed);
   c.invalid_rays = invalid_rays_.load(std::memory_order_relaxed);

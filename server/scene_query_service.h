@@ -10,10 +10,12 @@
 //
 // Deadlines and cancellation are checked before each batch is traced (unary)
 // and between engine calls (streams); a batch already being traced runs to
-// its end. Each stream chunk is answered by one reply, in order, echoing its
-// sequence; the first bad chunk ends the stream with its error. A stream is
-// read, traced and written by three threads (stream_pipeline.h), and chunks
-// that queued up while the engine was busy are traced in one engine call.
+// its end, unless the engine's cancellation stops it (the server's drain
+// after SIGTERM, serve_command.h). Each stream chunk is answered by one
+// reply, in order, echoing its sequence; the first bad chunk ends the stream
+// with its error. A stream is read, traced and written by three threads
+// (stream_pipeline.h), and chunks that queued up while the engine was busy
+// are traced in one engine call.
 //
 // Thread-safety: all handlers may run concurrently (gRPC's sync server calls
 // them from its thread pool); counters are atomics, the engine is thread-safe.
@@ -74,8 +76,9 @@ inline constexpr uint64_t kGroupRaysPerBrick = 1024;
 
 // Server-wide figures since start (a snapshot of the atomics).
 struct ServiceCounters {
-  uint64_t requests = 0;  // unary calls + stream chunks answered or refused
-  uint64_t failed_requests = 0;
+  uint64_t requests = 0;            // unary calls + stream chunks answered or refused
+  uint64_t failed_requests = 0;     // cancelled ones included
+  uint64_t cancelled_requests = 0;  // by the client, or by the drain after SIGTERM
   uint64_t rays = 0;
   uint64_t rays_hit = 0;
   uint64_t invalid_rays = 0;
@@ -88,26 +91,42 @@ struct ServiceCounters {
   uint64_t rays_in_brick_set = 0;
 };
 
-class SceneQueryService final : public v1::SceneQuery::Service {
+// The unary calls are registered as gRPC's "streamed unary" methods: the
+// handler reads the request itself, so bytes that do not parse are answered
+// INVALID_ARGUMENT naming the message type (gRPC's generated handler answers
+// them INTERNAL with no message). One message each way, as before. The
+// streams' handlers are replaced likewise (constructor) to read bytes.
+using SceneQueryBase = v1::SceneQuery::WithStreamedUnaryMethod_Intersect<
+    v1::SceneQuery::WithStreamedUnaryMethod_Occluded<v1::SceneQuery::Service>>;
+
+class SceneQueryService final : public SceneQueryBase {
  public:
   SceneQueryService(QueryEngine& engine, const ServiceOptions& options);
+
+  grpc::Status StreamedIntersect(
+      grpc::ServerContext* context,
+      grpc::ServerUnaryStreamer<v1::QueryRequest, v1::IntersectResponse>* streamer) override;
+  grpc::Status StreamedOccluded(
+      grpc::ServerContext* context,
+      grpc::ServerUnaryStreamer<v1::QueryRequest, v1::OccludedResponse>* streamer) override;
 
   grpc::Status Intersect(grpc::ServerContext* context, const v1::QueryRequest* request,
                          v1::IntersectResponse* response) override;
   grpc::Status Occluded(grpc::ServerContext* context, const v1::QueryRequest* request,
                         v1::OccludedResponse* response) override;
-  grpc::Status IntersectStream(
-      grpc::ServerContext* context,
-      grpc::ServerReaderWriter<v1::IntersectResponse, v1::QueryRequest>* stream) override;
-  grpc::Status OccludedStream(
-      grpc::ServerContext* context,
-      grpc::ServerReaderWriter<v1::OccludedResponse, v1::QueryRequest>* stream) override;
   grpc::Status GetSceneInfo(grpc::ServerContext* context, const v1::GetSceneInfoRequest* request,
                             v1::SceneInfo* response) override;
   grpc::Status GetStats(grpc::ServerContext* context, const v1::GetStatsRequest* request,
                         v1::ServerStats* response) override;
 
   ServiceCounters counters() const;
+
+  // Checks that the store on disk is still the one the engine opened (two
+  // stat calls; the server's main loop calls it once a second). The first
+  // time it is not (replaced by pack --force, or removed), logs a warning
+  // naming it, and GetStats.store_changed says so from then on. The engine
+  // goes on answering from the scene it opened, whole (scene_store.h).
+  void check_store();
 
  private:
   // A stream group's gathered rays and answers, reused across groups.
@@ -151,17 +170,27 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   template <QueryKind kKind, class Response>
   grpc::Status answer_group(grpc::ServerContext* context, std::span<const std::unique_ptr<StreamChunk>> group,
                             GroupBuffers& buffers, std::span<const std::unique_ptr<Response>> replies);
+  // IntersectStream / OccludedStream. Chunks arrive as bytes and are parsed
+  // here: gRPC's typed Read() reports bytes that do not parse as the end of
+  // the stream, which would end it OK with the chunk unanswered.
   template <QueryKind kKind, class Response>
   grpc::Status serve_stream(grpc::ServerContext* context,
-                            grpc::ServerReaderWriter<Response, v1::QueryRequest>* stream);
+                            grpc::ServerReaderWriter<Response, grpc::ByteBuffer>* stream);
+  // Reads a unary call's request (INVALID_ARGUMENT when its bytes do not
+  // parse), answers it with `handler` and writes the reply.
+  template <class Response, class Handler>
+  grpc::Status serve_unary(grpc::ServerContext* context,
+                           grpc::ServerUnaryStreamer<v1::QueryRequest, Response>* streamer,
+                           const char* method, const Handler& handler);
   // Counts one answered request and logs it at debug level.
-  grpc::Status finish(const char* method, const grpc::Status& status, uint64_t rays,
-                      std::chrono::steady_clock::time_point start);
+  grpc::Status finish(grpc::ServerContext* context, const char* method, const grpc::Status& status,
+                      uint64_t rays, std::chrono::steady_clock::time_point start);
 
   QueryEngine& engine_;
   const ServiceOptions options_;  // max_group_rays resolved (never 0)
   std::atomic<uint64_t> requests_{0};
   std::atomic<uint64_t> failed_requests_{0};
+  std::atomic<uint64_t> cancelled_requests_{0};
   std::atomic<uint64_t> rays_{0};
   std::atomic<uint64_t> rays_hit_{0};
   std::atomic<uint64_t> invalid_rays_{0};
@@ -173,6 +202,8 @@ class SceneQueryService final : public v1::SceneQuery::Service {
   std::atomic<uint64_t> rays_in_brick_set_{0};
   std::mutex shared_buffers_mutex_;
   std::vector<std::unique_ptr<SharedBuffers>> spare_shared_buffers_;  // at most two
+  std::mutex store_changed_mutex_;
+  std::string store_changed_;  // empty while the store on disk is the one opened
   // Client objects of recent shared calls, kept mapped (shared_mapping_cache.h).
   SharedMappingCache shared_mappings_;
 };

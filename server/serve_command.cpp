@@ -11,23 +11,31 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
+#include <thread>
 
 #include "core/cli/commands.h"
 #include "core/cli/subtree_options.h"
 #include "core/query/query_engine.h"
+#include "core/util/cancellation.h"
+#include "core/util/loopback_address.h"
 #include "server/scene_query_service.h"
 
 namespace outcore {
 
 namespace {
 
-// In-flight calls get this long to finish after SIGINT/SIGTERM.
-constexpr std::chrono::seconds kDrainDeadline{10};
+// Once the drain bound has passed and in-flight batches were cancelled, calls
+// get this long to end before the process exits without them: a cancelled
+// batch stops at its next brick, well within it.
+constexpr std::chrono::seconds kCancelGrace{1};
 // While serving, a summary is logged at most this often (when anything changed).
 constexpr std::chrono::seconds kSummaryInterval{60};
 
@@ -47,17 +55,19 @@ struct ServeArgs {
   int64_t stream_gather_ms = -1;  // negative: automatic
   bool no_shared_payloads = false;
   std::string log_level = "info";
+  double drain_s = 10;  // in-flight calls' time to finish after SIGINT/SIGTERM
 };
 
 void log_summary(const server::SceneQueryService& service, const QueryEngine& engine) {
   const server::ServiceCounters c = service.counters();
   const CacheCounters cache = engine.cache().counters();
   spdlog::info(
-      "{} requests ({} failed), {} rays ({} hit, {} invalid), {:.3f} s tracing; cache: {} hits, {} misses, "
-      "{} builds, {} evictions, {} bricks / {} bytes resident (peak {}, budget {})",
-      c.requests, c.failed_requests, c.rays, c.rays_hit, c.invalid_rays, c.seconds_tracing, cache.hits,
-      cache.misses, cache.builds, cache.evictions, cache.resident_bricks, cache.resident_bytes,
-      cache.peak_resident_bytes, engine.cache().budget_bytes());
+      "{} requests ({} failed, {} cancelled), {} rays ({} hit, {} invalid), {:.3f} s tracing; cache: {} "
+      "hits, "
+      "{} misses, {} builds, {} evictions, {} bricks / {} bytes resident (peak {}, budget {})",
+      c.requests, c.failed_requests, c.cancelled_requests, c.rays, c.rays_hit, c.invalid_rays,
+      c.seconds_tracing, cache.hits, cache.misses, cache.builds, cache.evictions, cache.resident_bricks,
+      cache.resident_bytes, cache.peak_resident_bytes, engine.cache().budget_bytes());
   if (engine.cache().subtree_tier() != nullptr) {
     const SubtreeTierCounters& t = cache.subtree;
     spdlog::info("subtree tier: {} loads ({:.3f} s), {} writes, {} rejected, {} files / {} bytes on disk",
@@ -95,10 +105,19 @@ int run_serve(const ServeArgs& args) {
     return report_command_error("serve", "--stream-gather-ms must be at most 60000 (-1: automatic)");
   }
   if (args.rpc_threads < 2) return report_command_error("serve", "--rpc-threads must be at least 2");
-  const auto colon = args.listen.rfind(':');
-  if (colon == std::string::npos || colon == 0 || colon + 1 == args.listen.size()) {
-    return report_command_error("serve", "--listen '" + args.listen + "' is not HOST:PORT");
+  if (!(args.drain_s > 0 && args.drain_s <= 3600)) {
+    return report_command_error(
+        "serve", "--drain-s must be more than 0 and at most 3600, got " + std::to_string(args.drain_s));
   }
+  const auto drain =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::duration<double>(args.drain_s));
+  // Unix sockets have no port; gRPC checks their paths.
+  const bool unix_socket = args.listen.starts_with("unix:") || args.listen.starts_with("unix-abstract:");
+  if (!unix_socket) {
+    const auto port = port_of(args.listen, 0);
+    if (!port.ok()) return report_command_error("serve", "--listen " + port.status().message());
+  }
+  const auto colon = args.listen.rfind(':');
 
   std::unique_ptr<tbb::global_control> threads;
   if (args.threads > 0) {
@@ -179,6 +198,7 @@ int run_serve(const ServeArgs& args) {
   while (signal_number <= 0) {
     const timespec tick{1, 0};
     signal_number = sigtimedwait(&stop_signals, nullptr, &tick);
+    if (signal_number <= 0) service.check_store();
     const auto now = std::chrono::steady_clock::now();
     if (signal_number <= 0 && now - last_summary >= kSummaryInterval) {
       const uint64_t requests = service.counters().requests;
@@ -187,10 +207,39 @@ int run_serve(const ServeArgs& args) {
       last_summary = now;
     }
   }
-  spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, kDrainDeadline.count());
+  spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, args.drain_s);
   server->GetHealthCheckService()->Shutdown();  // NOT_SERVING from now on
-  server->Shutdown(std::chrono::system_clock::now() + kDrainDeadline);
-  server->Wait();
+  // gRPC cancels the calls still running at the deadline, but waits for their
+  // handlers to return, and a handler inside the engine returns only when its
+  // batch ends. So this thread watches the bound: past it, the engine's
+  // batches are cancelled, and past the grace the process exits regardless.
+  const auto drain_end = std::chrono::steady_clock::now() + drain;
+  std::mutex stop_mutex;
+  std::condition_variable stop_done;
+  bool stopped = false;
+  std::thread stopper([&] {
+    server->Shutdown(std::chrono::system_clock::now() + drain);
+    server->Wait();
+    std::lock_guard lock(stop_mutex);
+    stopped = true;
+    stop_done.notify_all();
+  });
+  {
+    std::unique_lock lock(stop_mutex);
+    if (!stop_done.wait_until(lock, drain_end, [&] { return stopped; })) {
+      spdlog::warn("drain bound of {} s passed with calls in flight: cancelling their batches", args.drain_s);
+      request_cancel();
+      if (!stop_done.wait_until(lock, drain_end + kCancelGrace, [&] { return stopped; })) {
+        log_summary(service, **engine);
+        spdlog::error("calls still running {} s after the drain bound; exiting without them",
+                      kCancelGrace.count());
+        spdlog::default_logger()->flush();
+        std::fflush(nullptr);
+        std::_Exit(1);
+      }
+    }
+  }
+  stopper.join();
   log_summary(service, **engine);
   spdlog::info("stopped");
   return 0;
@@ -226,6 +275,9 @@ void add_serve_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_flag("--no-shared-payloads", args->no_shared_payloads,
                 "Refuse shared-memory payloads (same-host clients then send rays and get hits over gRPC)");
+  cmd->add_option("--drain-s", args->drain_s,
+                  "After SIGINT/SIGTERM, seconds in-flight calls get to finish before they are cancelled")
+      ->capture_default_str();
   cmd->add_option("--log-level", args->log_level, "Log level")
       ->check(CLI::IsMember({"debug", "info", "warn"}))
       ->capture_default_str();

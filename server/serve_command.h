@@ -1,7 +1,9 @@
 // `outcore serve SCENE [--listen HOST:PORT] ...`: opens a scene store and
 // answers outcore.v1.SceneQuery over gRPC (with grpc.health.v1 and server
-// reflection) until SIGINT/SIGTERM, then drains in-flight calls (at most 10 s)
-// and exits 0. Prints "listening on HOST:PORT" on stdout once it accepts
+// reflection) until SIGINT/SIGTERM, then drains in-flight calls for at most
+// --drain-s (10 s), cancels the batches still being traced then (through the
+// engine's cancellation) and exits 0; should a call still not have ended a
+// second later, it exits 1 without it. Prints "listening on HOST:PORT" on stdout once it accepts
 // calls (the real port when PORT is 0); logs go to stderr.
 //
 // Thread-safety: called once from main().

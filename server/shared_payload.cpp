@@ -126,7 +126,11 @@ Expected<std::shared_ptr<SharedMemoryObject>> open_shared_payload(const v1::Quer
   }
   auto object = mappings.open(payload.name(), map_bytes);
   if (!object.ok()) {
-    if (object.status().code() == StatusCode::kInvalidArgument) return object.status();
+    // A FIFO or a link under the name is no client's object: an error, not
+    // a reason to send bytes. Missing objects and other users' (a client
+    // running as another user) are: the client then sends bytes.
+    if (object.status().code() == StatusCode::kInvalidArgument)
+      return object.status().with_context("shared.name");
     return failed_precondition(object.status().message());
   }
   for (const auto& [what, offset, bytes] : {std::tuple{"rays", payload.rays_offset(), rays_bytes},

@@ -40,8 +40,10 @@ bool is_loopback_peer(std::string_view peer);
 // earlier call on the same object) and checks its token. INVALID_ARGUMENT for a
 // malformed batch or payload (layout, count, non-empty batch.rays, a bad
 // name, ranges inside the header, outside the object or overlapping);
-// PERMISSION_DENIED for a token that does not match; FAILED_PRECONDITION
-// when the object cannot be opened (a client then sends bytes).
+// INVALID_ARGUMENT naming the object when it is not a regular file (a FIFO,
+// a symbolic link: refused without waiting on it); PERMISSION_DENIED for a
+// token that does not match; FAILED_PRECONDITION when the object cannot be
+// opened or belongs to another user (a client then sends bytes).
 Expected<std::shared_ptr<SharedMemoryObject>> open_shared_payload(const v1::QueryRequest& request,
                                                                   uint64_t answer_bytes_per_ray,
                                                                   SharedMappingCache& mappings);

@@ -899,5 +899,110 @@ TEST_F(ServerApi, SigintDrainsAnInFlightStreamAndExitsZero) {
   expect_signal_drains(store_, SIGINT, chunk, hit_bytes(serial_hits(chunk)));
 }
 
+// The drain after SIGTERM is bounded: a batch still being traced when the
+// bound passes is cancelled through the engine (the client gets an error, the
+// log counts the request as cancelled and failed) and the process exits
+// within the bound plus a little. The batch thrashes a small cache ray by ray
+// (no_reorder), which takes far longer than the test.
+TEST(ServerDrain, ABatchStillTracedWhenTheDrainBoundPassesIsCancelledAndTheServerExitsInTime) {
+  TempDir dir;
+  const std::string store = dir.file("scene");
+  const SubprocessResult packed = testing::run_outcore(
+      {"pack", "gen:sphere?level=6", "-o", store, "--brick-tris", "64", "-q", "--no-sync"},
+      std::chrono::milliseconds(120'000));
+  ASSERT_TRUE(packed.succeeded()) << packed.describe();
+  constexpr double kDrainSeconds = 2;
+  std::string error;
+  auto server = ServerProcess::start(store, {"--cache-mb", "1", "--drain-s", "2", "--threads", "1"}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto opened = SceneStore::open(store);
+  ASSERT_TRUE(opened.ok()) << opened.status().to_string();
+  const std::vector<Ray> r = testing::make_test_rays((*opened)->manifest().bounds, 400'000, 8);
+  v1::QueryRequest request = make_request(r);
+  request.set_no_reorder(true);
+
+  grpc::ChannelArguments arguments;
+  arguments.SetMaxReceiveMessageSize(-1);
+  arguments.SetMaxSendMessageSize(-1);
+  auto stub = v1::SceneQuery::NewStub(
+      grpc::CreateCustomChannel(server->address(), grpc::InsecureChannelCredentials(), arguments));
+  grpc::Status long_call;
+  std::thread caller([&] {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    v1::IntersectResponse response;
+    long_call = stub->Intersect(&context, request, &response);
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the batch is being traced
+  const auto signalled = std::chrono::steady_clock::now();
+  const int exit_code = server->stop(SIGTERM, std::chrono::seconds(12));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - signalled).count();
+  caller.join();
+  EXPECT_EQ(exit_code, 0) << server->log();
+  EXPECT_LT(seconds, kDrainSeconds + 1.5) << server->log();
+  EXPECT_FALSE(long_call.ok()) << "the cancelled batch was answered";
+  const std::string log = server->log();
+  EXPECT_TRUE(contains(log, "1 requests (1 failed, 1 cancelled)")) << log;
+}
+
+// `pack --force` may replace the store under a running server. The server
+// goes on answering from the scene it opened (it holds its files open, so
+// never a mix of both), and says so: one warning in its log and
+// GetStats.store_changed, both naming the store.
+TEST(ServerStoreReplaced, AServerWhoseStoreWasRepackedSaysSoAndKeepsServingTheSceneItOpened) {
+  TempDir dir;
+  const std::string store = dir.file("scene");
+  const auto pack = [&](const std::string& input) {
+    const SubprocessResult packed = testing::run_outcore(
+        {"pack", input, "-o", store, "--force", "--brick-tris", "200", "-q", "--no-sync"},
+        std::chrono::milliseconds(120'000));
+    ASSERT_TRUE(packed.succeeded()) << packed.describe();
+  };
+  pack("gen:sphere?level=3");
+  std::string error;
+  auto server = ServerProcess::start(store, {}, error);
+  ASSERT_NE(server, nullptr) << error;
+  auto opened = SceneStore::open(store);
+  ASSERT_TRUE(opened.ok()) << opened.status().to_string();
+  const std::vector<Ray> r = testing::make_test_rays((*opened)->manifest().bounds, 5000, 12);
+  opened->reset();
+  auto stub =
+      v1::SceneQuery::NewStub(grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  const auto query = [&] {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    v1::IntersectResponse response;
+    const grpc::Status status = stub->Intersect(&context, make_request(r), &response);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return response.hits();
+  };
+  const auto changed = [&] {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    v1::ServerStats stats;
+    EXPECT_TRUE(stub->GetStats(&context, v1::GetStatsRequest(), &stats).ok());
+    return stats.store_changed();
+  };
+  const std::string before = query();
+  EXPECT_EQ(changed(), "");
+
+  pack("gen:torus?major=0.7&minor=0.3");
+  std::string why;
+  for (int i = 0; i < 40 && why.empty(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    why = changed();
+  }
+  EXPECT_TRUE(contains(why, store)) << why;
+  EXPECT_TRUE(contains(why, "replaced")) << why;
+  EXPECT_TRUE(query() == before) << "the server answered from another scene than the one it opened";
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  EXPECT_TRUE(query() == before);
+  const std::string log = server->log();
+  EXPECT_EQ(testing::count_of(log, "was replaced"), 1u) << log;
+  EXPECT_TRUE(contains(log, store)) << log;
+  stub.reset();
+  EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
+}
+
 }  // namespace
 }  // namespace outcore

@@ -297,5 +297,31 @@ TEST_F(ServerE2e, ServeRejectsBadOptionsAndMissingStores) {
   EXPECT_TRUE(contains(r.stderr_text, "cannot listen on")) << r.stderr_text;
 }
 
+// A port is 0 to 65535 (0: any free port, for serve only); gRPC's resolver
+// would take 99999 modulo 65536 and serve or connect on 34463.
+TEST_F(ServerE2e, PortsOutsideTheirRangeOrNotNumbersAreErrorsNamingTheValue) {
+  const auto quick = [](std::vector<std::string> args) {
+    return testing::run_outcore(std::move(args), std::chrono::milliseconds(10'000));
+  };
+  for (const std::string listen : {"127.0.0.1:99999", "127.0.0.1:65536", "127.0.0.1:-1", "127.0.0.1:http",
+                                   "127.0.0.1:", "127.0.0.1", "[::1]:70000"}) {
+    const SubprocessResult r = quick({"serve", gen_->store, "--listen", listen});
+    EXPECT_FALSE(r.timed_out) << listen << ": the server started";
+    EXPECT_EQ(r.exit_code, 1) << listen << ": " << r.describe();
+    EXPECT_TRUE(contains(r.stderr_text, "'" + listen + "'")) << r.stderr_text;
+    EXPECT_TRUE(contains(r.stderr_text, "port") || contains(r.stderr_text, "HOST:PORT")) << r.stderr_text;
+  }
+  const std::string out = dir_->file("never.npy");
+  for (const std::string server : {"127.0.0.1:99999", "127.0.0.1:0", "localhost:123456",
+                                   "dns:///127.0.0.1:65536", "ipv4:127.0.0.1:1,127.0.0.1:99999"}) {
+    const SubprocessResult r =
+        quick({"query", "--server", server, "--rays", gen_->small_rays, "-o", out, "--deadline-s", "5"});
+    EXPECT_EQ(r.exit_code, 1) << server << ": " << r.describe();
+    EXPECT_TRUE(contains(r.stderr_text, "is outside 1 to 65535")) << server << ": " << r.stderr_text;
+    EXPECT_FALSE(contains(r.stderr_text, "UNAVAILABLE")) << server << ": " << r.stderr_text;
+  }
+  EXPECT_FALSE(std::ifstream(out).good()) << "a failed query wrote its output";
+}
+
 }  // namespace
 }  // namespace outcore

@@ -388,5 +388,43 @@ TEST_F(ServerFuzz, MalformedRequestsGetNamedErrorsAndNeverHurtTheServer) {
   EXPECT_GT(counters.requests, counters.failed_requests);
 }
 
+// Bytes that do not parse are the client's error, and it is told which
+// message they were meant to be (gRPC's own answer is INTERNAL, no message).
+TEST_F(ServerFuzz, BytesThatAreNoQueryRequestAreInvalidArgumentNamingTheMessage) {
+  const std::vector<std::string> garbage = {
+      std::string("\x0f", 1),   // field 1 with wire type 7
+      std::string(11, '\xff'),  // a varint tag longer than ten bytes
+      std::string("\x0a\x10"
+                  "ab",
+                  4),                         // batch: 16 bytes announced, 2 sent
+      std::string("\x0a\x03\x08\x80\x80", 5)  // batch.layout_version: a varint cut short
+  };
+  // A stream's chunk likewise, named by its number (gRPC's typed reader took
+  // it for the end of the stream, which then ended OK with it unanswered).
+  for (const char* method :
+       {"/outcore.v1.SceneQuery/Intersect", "/outcore.v1.SceneQuery/Occluded",
+        "/outcore.v1.SceneQuery/IntersectStream", "/outcore.v1.SceneQuery/OccludedStream"}) {
+    for (std::size_t i = 0; i < garbage.size(); ++i) {
+      const grpc::Status status = raw_call(method, garbage[i]);
+      EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+          << method << " garbage " << i << ": " << status.error_message();
+      EXPECT_TRUE(contains(status.error_message(), "could not be parsed as outcore.v1.QueryRequest"))
+          << method << " garbage " << i << ": '" << status.error_message() << "'";
+      if (contains(method, "Stream")) {
+        EXPECT_TRUE(contains(status.error_message(), "chunk 0")) << status.error_message();
+      }
+    }
+  }
+  // A well-formed request still gets its answer.
+  const std::vector<Ray> rays = testing::make_test_rays(engine_->store().manifest().bounds, 64, 3);
+  v1::QueryRequest request;
+  request.mutable_batch()->set_layout_version(1);
+  request.mutable_batch()->set_ray_layout(v1::RAY_LAYOUT_F32X8);
+  request.mutable_batch()->set_ray_count(rays.size());
+  request.mutable_batch()->set_rays(reinterpret_cast<const char*>(rays.data()), rays.size() * sizeof(Ray));
+  const grpc::Status status = raw_call("/outcore.v1.SceneQuery/Intersect", request.SerializeAsString());
+  EXPECT_TRUE(status.ok()) << status.error_message();
+}
+
 }  // namespace
 }  // namespace outcore

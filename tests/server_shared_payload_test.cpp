@@ -10,8 +10,11 @@
 #include <signal.h>
 #include <sys/mman.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -350,6 +353,75 @@ TEST(ServerSharedPayloadOff, ANoSharedPayloadsServerRefusesThemAndClientsFallBac
   stub.reset();
   client->reset();
   EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
+}
+
+// Any local user can make /dev/shm/outcore-x a FIFO. Opening one for reading
+// blocks until a writer comes: every such call would hold an RPC thread for
+// ever, and with as many as --rpc-threads ordinary calls could not be served
+// (here more such calls than the server's 4 threads).
+// The server must refuse it at once, naming the object, and go on serving.
+TEST(ServerSharedPayloadFifo, AFifoNamedAsAnObjectIsRefusedAtOnceAndOrdinaryQueriesGoOn) {
+  const std::unique_ptr<ServedScene> scene = ServedScene::pack({"gen:sphere?level=3"});
+  ASSERT_NE(scene, nullptr);
+  std::string error;
+  auto server = ServerProcess::start(scene->store(), {"--rpc-threads", "4"}, error);
+  ASSERT_NE(server, nullptr) << error;
+  const std::string name = "/outcore-test-fifo-" + std::to_string(getpid());
+  const std::string path = "/dev/shm" + name;
+  ::unlink(path.c_str());
+  ASSERT_EQ(mkfifo(path.c_str(), 0600), 0) << std::strerror(errno);
+  // Releases server threads a broken server left blocked in the FIFO, so that
+  // it can still be stopped.
+  const auto release_blocked_readers = [&] {
+    const int writer = ::open(path.c_str(), O_WRONLY | O_NONBLOCK);
+    if (writer >= 0) ::close(writer);
+  };
+
+  v1::QueryRequest request;
+  request.mutable_batch()->set_layout_version(1);
+  request.mutable_batch()->set_ray_layout(v1::RAY_LAYOUT_F32X8);
+  request.mutable_batch()->set_ray_count(1);
+  request.mutable_shared()->set_name(name);
+  request.mutable_shared()->set_rays_offset(kHeader);
+  request.mutable_shared()->set_answers_offset(kHeader + sizeof(Ray));
+  request.mutable_shared()->set_token(std::string(SharedMemoryObject::kTokenBytes, 'x'));
+  auto stub =
+      v1::SceneQuery::NewStub(grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  for (int call = 0; call < 6; ++call) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(3));
+    v1::IntersectResponse response;
+    const grpc::Status status = stub->Intersect(&context, request, &response);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << "call " << call << ": " << status.error_message();
+    EXPECT_NE(status.error_message().find(name), std::string::npos) << status.error_message();
+    EXPECT_NE(status.error_message().find("FIFO"), std::string::npos) << status.error_message();
+  }
+
+  // Ordinary queries, in bytes and through shared memory, answer as the engine.
+  const std::vector<Ray> r = testing::make_test_rays(scene->engine->store().manifest().bounds, 20'000, 5);
+  std::vector<Hit> want(r.size());
+  ASSERT_TRUE(scene->engine->intersect(r, want, QueryOptions{}).ok());
+  client::ConnectOptions options;
+  options.timeout_seconds = 5;
+  auto client = client::SceneClient::connect(server->address(), options);
+  const bool connected = client.ok();
+  EXPECT_TRUE(connected) << client.status().to_string();
+  if (connected) {
+    client::CallOptions call;
+    call.deadline_seconds = 5;
+    for (const std::size_t n : {std::size_t{1000}, r.size()}) {
+      std::vector<Hit> hits(n);
+      const Status status = (*client)->intersect(std::span<const Ray>(r.data(), n), hits, call);
+      EXPECT_TRUE(status.ok()) << status.to_string();
+      EXPECT_TRUE(bytes_of(hits.data(), n * sizeof(Hit)) == bytes_of(want.data(), n * sizeof(Hit))) << n;
+    }
+    client->reset();
+  }
+  release_blocked_readers();
+  ::unlink(path.c_str());
+  stub.reset();
+  EXPECT_EQ(server->stop(SIGTERM, std::chrono::seconds(15)), 0) << server->log();
 }
 
 TEST(LoopbackTarget, OnlyThisHostsAddressesCount) {

@@ -192,6 +192,7 @@ SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string add
 
 Expected<std::unique_ptr<SceneClient>> SceneClient::connect(const std::string& address,
                                                             const ConnectOptions& options) {
+  OUTCORE_RETURN_IF_ERROR(check_target_ports(address));
   grpc::ChannelArguments arguments;
   // The server's limit is the one that matters; ours must not be lower.
   arguments.SetMaxReceiveMessageSize(-1);
@@ -276,6 +277,43 @@ bool is_loopback_target(const std::string& address) {
     }
   }
   return is_loopback_host(host_of(target));
+}
+
+Status check_target_ports(const std::string& address) {
+  std::string_view target = address;
+  const auto check = [&](std::string_view host_port) -> Status {
+    const auto port = port_of(host_port, 1);
+    if (port.ok()) return Status::Ok();
+    // The message quotes host_port; the whole target too when it is more.
+    if (host_port == address) return invalid_argument("server address " + port.status().message());
+    return invalid_argument("server address '" + address + "': " + port.status().message());
+  };
+  if (target.starts_with("ipv4:") || target.starts_with("ipv6:")) {
+    target.remove_prefix(5);
+    while (true) {
+      const auto comma = target.find(',');
+      OUTCORE_RETURN_IF_ERROR(check(target.substr(0, comma)));
+      if (comma == std::string_view::npos) return Status::Ok();
+      target.remove_prefix(comma + 1);
+    }
+  }
+  if (target.starts_with("dns:")) {
+    target.remove_prefix(4);
+    if (target.starts_with("//")) {
+      const auto slash = target.find('/', 2);
+      if (slash == std::string_view::npos) return Status::Ok();  // gRPC names what is wrong
+      target.remove_prefix(slash + 1);
+    }
+    return check(target);
+  }
+  // "name:rest" with a non-numeric rest is another scheme's target (unix:/path,
+  // ...), with no port to check; "host:digits" is a bare HOST:PORT.
+  const auto colon = target.find(':');
+  const bool scheme = colon != std::string_view::npos && !target.starts_with("[") &&
+                      target.find_first_not_of("abcdefghijklmnopqrstuvwxyz-") == colon &&
+                      !target.substr(colon + 1).empty() &&
+                      target.substr(colon + 1).find_first_not_of("0123456789") != std::string_view::npos;
+  return scheme ? Status::Ok() : check(target);
 }
 
 Expected<std::unique_ptr<SharedMemoryObject>> SceneClient::take_object(uint64_t bytes) {

@@ -131,6 +131,12 @@ class SceneClient {
 // True for gRPC targets on this host: 127.x.y.z, localhost, [::1], unix:.
 bool is_loopback_target(const std::string& address);
 
+// INVALID_ARGUMENT naming `address` when a HOST:PORT in it (bare, after
+// dns:, or in an ipv4:/ipv6: list) has no port or one that is not 1 to 65535:
+// gRPC's resolver would take the port modulo 65536 and connect elsewhere.
+// Targets of other schemes (unix:, ...) are left to gRPC.
+Status check_target_ports(const std::string& address);
+
 // The engine's figures from the wire's (a reply's, or CallStats::engine).
 // Those the wire does not carry per request stay 0: peak_bytes_resident,
 // cache_budget_bytes and proxy_bytes (ServerStats has them).

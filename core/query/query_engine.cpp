@@ -19,6 +19,7 @@
 #include "core/upper/upper_packet_traversal.h"
 #include "core/upper/upper_traversal.h"
 #include "core/upper/upper_wide8_traversal.h"
+#include "core/util/cancellation.h"
 #include "core/util/cpu_features.h"
 #include "core/util/json_writer.h"
 
@@ -281,6 +282,14 @@ Status QueryEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occlu
   if (occluded.size() != rays.size()) return invalid_argument("occlusion flags and rays differ in length");
   return run<QueryKind::kAnyHit>(rays, nullptr, occluded.data(), options, stats);
 }
+
+namespace {
+
+Status interrupted() {
+  return cancelled("the batch was cancelled before all its rays were traced (the process is stopping)");
+}
+
+}  // namespace
 
 template <QueryKind kKind>
 Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
@@ -568,6 +577,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     // One ray at a time, in input order, brick by brick.
     for (std::size_t i = 0; i < n; ++i) {
       if (!valid[i]) continue;
+      if (cancel_requested()) return interrupted();
       progress[i] = RayProgress{};
       const uint32_t id = static_cast<uint32_t>(i);
       const auto t0 = Clock::now();
@@ -1036,6 +1046,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
     std::vector<BuildTask> build_tasks;
     std::vector<std::size_t> ahead_begin;
     while (!waiting.empty()) {
+      if (cancel_requested()) return interrupted();
       // Wave: every waiting brick that is resident now is traced at once, in
       // parallel over (brick, chunk) tasks — no build to wait for, and with
       // many bricks and short queues (a large scene) parallelism across

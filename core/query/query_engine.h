@@ -27,6 +27,11 @@
 // as misses and counted; with strict they are an INVALID_ARGUMENT naming the
 // first bad ray.
 //
+// Cancellation: once cancel_requested() (core/util/cancellation.h) is true, a
+// batch stops at its next brick (at its next ray with reordering off) and
+// returns CANCELLED, its answers incomplete; the server cancels its in-flight
+// batches so when its drain after SIGTERM runs out.
+//
 // Thread-safety: intersect() and occluded() may be called concurrently from
 // several threads; concurrent batches share the cache (and its budget).
 #pragma once

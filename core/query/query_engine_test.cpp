@@ -12,6 +12,7 @@
 
 #include "core/query/brute_force_reference.h"
 #include "core/store/scene_packer.h"
+#include "core/util/cancellation.h"
 #include "tests/support/packed_scene.h"
 #include "tests/support/test_paths.h"
 
@@ -419,6 +420,35 @@ TEST(QueryEngine, RaysInsideTheSceneEndingEarlyOrStartingLateFollowTheirSegment)
   EXPECT_NEAR(hits[3].t, hits[0].t / 2, 1e-6f);
   // The geometric normal of an outward-wound sphere points outwards, along the ray.
   EXPECT_GT(dot(hits[0].normal, dir), 0.99f);
+}
+
+// A stopping process (the server's drain after SIGTERM) cancels batches in
+// flight: each stops with CANCELLED instead of running to its end, and the
+// engine answers again once the request is withdrawn.
+TEST(QueryEngine, ACancelRequestStopsBatchesWithCancelledAndLeavesTheEngineUsable) {
+  const auto scene = pack({"gen:sphere?level=4"}, 100);
+  ASSERT_NE(scene, nullptr);
+  // A budget far below the scene: the queued path with builds, not a sweep.
+  const auto engine = engine_for(*scene, uint64_t{256} << 10);
+  const std::vector<Ray> rays = mixed_rays(scene->bounds, 4000, 7);
+  std::vector<Hit> want(rays.size());
+  ASSERT_TRUE(engine->intersect(rays, want, QueryOptions{}).ok());
+  request_cancel();
+  for (const bool reorder : {true, false}) {
+    QueryOptions options;
+    options.reorder = reorder;
+    std::vector<Hit> hits(rays.size());
+    const Status status = engine->intersect(rays, hits, options);
+    std::vector<uint8_t> flags(rays.size());
+    const Status occluded = engine->occluded(rays, flags, options);
+    EXPECT_EQ(status.code(), StatusCode::kCancelled) << "reorder " << reorder << ": " << status.to_string();
+    EXPECT_EQ(occluded.code(), StatusCode::kCancelled)
+        << "reorder " << reorder << ": " << occluded.to_string();
+  }
+  reset_cancel();
+  std::vector<Hit> hits(rays.size());
+  ASSERT_TRUE(engine->intersect(rays, hits, QueryOptions{}).ok());
+  EXPECT_EQ(std::memcmp(hits.data(), want.data(), hits.size() * sizeof(Hit)), 0);
 }
 
 TEST(QueryEngine, InvalidRaysAreCountedMissesOrAStrictErrorNamingTheFirst) {

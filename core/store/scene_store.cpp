@@ -13,6 +13,17 @@
 
 namespace outcore {
 
+namespace {
+
+template <class Identity>
+Identity identity_of(const struct stat& info) {
+  return {static_cast<uint64_t>(info.st_dev), static_cast<uint64_t>(info.st_ino),
+          static_cast<uint64_t>(info.st_size),
+          static_cast<int64_t>(info.st_mtim.tv_sec) * 1'000'000'000 + info.st_mtim.tv_nsec};
+}
+
+}  // namespace
+
 Expected<std::shared_ptr<const SceneStore>> SceneStore::open(const std::string& directory) {
   std::error_code ec;
   if (!std::filesystem::is_directory(directory, ec)) {
@@ -25,13 +36,20 @@ Expected<std::shared_ptr<const SceneStore>> SceneStore::open(const std::string& 
     return not_found("scene store " + directory + " has no " + kManifestFileName +
                      " (not a scene store, or an interrupted pack)");
   }
+  // Before the read: a manifest replaced in between then reads as changed.
+  struct stat manifest_info {};
+  if (::stat(manifest_path.c_str(), &manifest_info) != 0) {
+    return io_error_from_errno("cannot stat " + manifest_path);
+  }
+  store->manifest_identity_ = identity_of<FileIdentity>(manifest_info);
   OUTCORE_ASSIGN_OR_RETURN(store->manifest_, read_manifest(manifest_path));
 
   const std::string data_path = directory + "/" + kBrickDataFileName;
   store->brick_fd_ = ::open(data_path.c_str(), O_RDONLY | O_CLOEXEC);
   if (store->brick_fd_ < 0) return io_error_from_errno("cannot open brick data " + data_path);
-  struct stat st{};
+  struct stat st {};
   if (fstat(store->brick_fd_, &st) != 0) return io_error_from_errno("cannot stat " + data_path);
+  store->brick_file_identity_ = identity_of<FileIdentity>(st);
   const auto data_bytes = static_cast<uint64_t>(st.st_size);
   const auto& bricks = store->manifest_.bricks;
   for (size_t id = 0; id < bricks.size(); ++id) {
@@ -43,6 +61,27 @@ Expected<std::shared_ptr<const SceneStore>> SceneStore::open(const std::string& 
   }
   store->bytes_on_disk_ = data_bytes + std::filesystem::file_size(manifest_path, ec);
   return std::shared_ptr<const SceneStore>(std::move(store));
+}
+
+Status SceneStore::check_unchanged_on_disk() const {
+  for (const auto& [name, identity] : {std::pair{kManifestFileName, &manifest_identity_},
+                                       std::pair{kBrickDataFileName, &brick_file_identity_}}) {
+    const std::string path = directory_ + "/" + name;
+    struct stat info {};
+    if (::stat(path.c_str(), &info) != 0) {
+      if (errno == ENOENT || errno == ENOTDIR) {
+        return failed_precondition("the scene store " + directory_ + " was removed from disk (" + path +
+                                   " is gone) since it was opened");
+      }
+      return io_error_from_errno("cannot stat " + path);
+    }
+    if (identity_of<FileIdentity>(info) != *identity) {
+      return failed_precondition("the scene store " + directory_ +
+                                 " was replaced on disk (by pack --force?) since it was opened: " + path +
+                                 " is another file now");
+    }
+  }
+  return Status::Ok();
 }
 
 SceneStore::~SceneStore() {
@@ -80,7 +119,9 @@ Status SceneStore::load_brick(uint32_t brick_id, BrickData& out) const {
   out.triangles.resize(count);
   out.ids.resize(count);
   Status status = pread_fully(brick_fd_, &header, sizeof header, record.offset);
-  if (status.ok()) status = pread_fully(brick_fd_, out.triangles.data(), count * sizeof(Triangle), record.offset + sizeof header);
+  if (status.ok())
+    status =
+        pread_fully(brick_fd_, out.triangles.data(), count * sizeof(Triangle), record.offset + sizeof header);
   if (status.ok()) {
     status = pread_fully(brick_fd_, out.ids.data(), count * sizeof(TriangleId),
                          record.offset + sizeof header + count * sizeof(Triangle));

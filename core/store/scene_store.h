@@ -2,7 +2,9 @@
 // open() reads and checks the manifest (format version, checksum, consistency)
 // and that bricks.dat holds every brick's byte range; load_brick() reads one
 // brick on demand and verifies its header and checksum, naming the brick in
-// every error.
+// every error. The brick file stays open from open() on, so a store replaced
+// or removed on disk afterwards (pack --force) is still read whole, never
+// mixed with its successor; check_unchanged_on_disk() tells that it happened.
 //
 // Thread-safety: after open(), all const member functions may be called from
 // any number of threads (reads use pread on one file descriptor).
@@ -35,12 +37,29 @@ class SceneStore {
   // brick when its bytes are truncated or altered.
   Status load_brick(uint32_t brick_id, BrickData& out) const;
 
+  // FAILED_PRECONDITION naming the directory when the store on disk is no
+  // longer the one opened: its manifest or brick file was replaced (another
+  // pack --force) or removed. Two stat calls; reads from this store are
+  // unaffected either way.
+  Status check_unchanged_on_disk() const;
+
  private:
+  // Which file a path named when the store was opened.
+  struct FileIdentity {
+    uint64_t device = 0;
+    uint64_t inode = 0;
+    uint64_t size = 0;
+    int64_t modified_ns = 0;
+    bool operator==(const FileIdentity&) const = default;
+  };
+
   SceneStore() = default;
 
   std::string directory_;
   Manifest manifest_;
   int brick_fd_ = -1;
+  FileIdentity manifest_identity_;
+  FileIdentity brick_file_identity_;
   uint64_t bytes_on_disk_ = 0;
 };
 

@@ -143,13 +143,35 @@ Status SharedMemoryObject::check_name(std::string_view name) {
 
 namespace {
 
+const char* file_type_name(mode_t mode) {
+  if (S_ISFIFO(mode)) return "a FIFO";
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISSOCK(mode)) return "a socket";
+  if (S_ISLNK(mode)) return "a symbolic link";
+  return "not a regular file";
+}
+
 // shm_open(name) and fstat; the descriptor and what fstat said, or the
-// errors open() reports.
+// errors open() reports. Anyone who can write /dev/shm can put a FIFO, a
+// symbolic link or someone else's file under a name we accept: the object is
+// opened without following links and without waiting (a FIFO opened for
+// reading would block until a writer came, holding the caller's thread for
+// ever), and anything but a regular file of this process's user is refused
+// before it is used.
 Expected<std::pair<int, struct stat>> open_and_stat(const std::string& name, int flags) {
-  const int fd = shm_open(name.c_str(), flags, 0);
+  const int fd = shm_open(name.c_str(), flags | O_NONBLOCK | O_NOFOLLOW | O_CLOEXEC, 0);
   if (fd < 0) {
     const int error = errno;
     if (error == ENOENT) return not_found("no shared-memory object " + name);
+    if (error == ELOOP) {
+      return invalid_argument("the shared-memory object " + name +
+                              " is a symbolic link; only regular objects are opened");
+    }
+    if (error == EACCES || error == EPERM) {
+      return permission_denied("cannot open the shared-memory object " + name + ": " + std::strerror(error));
+    }
     return io_error("cannot open the shared-memory object " + name + ": " + std::strerror(error));
   }
   struct stat info {};
@@ -158,9 +180,16 @@ Expected<std::pair<int, struct stat>> open_and_stat(const std::string& name, int
     ::close(fd);
     return io_error("cannot stat the shared-memory object " + name + ": " + std::strerror(error));
   }
-  if (!S_ISREG(info.st_mode) || info.st_uid != geteuid()) {
+  if (!S_ISREG(info.st_mode)) {
     ::close(fd);
-    return io_error("the shared-memory object " + name + " is not a regular object of this user");
+    return invalid_argument("the shared-memory object " + name + " is " + file_type_name(info.st_mode) +
+                            ", not a regular file");
+  }
+  if (info.st_uid != geteuid()) {
+    ::close(fd);
+    return permission_denied("the shared-memory object " + name + " belongs to uid " +
+                             std::to_string(info.st_uid) + ", not to this process's uid " +
+                             std::to_string(geteuid()));
   }
   return std::pair{fd, info};
 }

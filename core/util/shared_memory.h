@@ -62,13 +62,16 @@ class SharedMemoryObject {
 
   // Opens an existing object (the server's side) and maps its first
   // min(map_bytes, size()) bytes, all pages at once: only what a call's
-  // ranges need, however large the object. INVALID_ARGUMENT for a bad name;
-  // NOT_FOUND when there is no such object; IO_ERROR otherwise (also for an
-  // object that is not a regular one of this process's user).
+  // ranges need, however large the object. Never waits: the name is opened
+  // non-blocking and without following links, and checked before use.
+  // INVALID_ARGUMENT for a bad name and for anything but a regular file (a
+  // FIFO, a symbolic link, a directory, ...), naming what it is; NOT_FOUND
+  // when there is no such object; PERMISSION_DENIED for an object of another
+  // user (or one this user may not open); IO_ERROR otherwise.
   static Expected<SharedMemoryObject> open(const std::string& name, std::size_t map_bytes = ~std::size_t{0});
 
   // The identity of the object `name` names now (open, fstat, close; no
-  // mapping). Errors as open()'s.
+  // mapping, no waiting). Errors as open()'s.
   static Expected<SharedObjectIdentity> identify(const std::string& name);
 
   // Creates a new object of `bytes` bytes (at least kHeaderBytes), named

@@ -3,10 +3,15 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <sys/mman.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <chrono>
 #include <cstring>
+#include <future>
+#include <memory>
 #include <numeric>
 #include <string>
 #include <thread>
@@ -170,6 +175,42 @@ TEST(SharedMemoryObject, AMissingObjectIsNotFound) {
   auto opened = SharedMemoryObject::open("/outcore-test-no-such-object-4f1c2a");
   ASSERT_FALSE(opened.ok());
   EXPECT_EQ(opened.status().code(), StatusCode::kNotFound);
+}
+
+// Anyone who can write /dev/shm can put a FIFO or a symbolic link under a
+// name the server accepts. Opening a FIFO for reading blocks until a writer
+// comes, so the calls run on a thread of their own: should one block, the
+// test opens the FIFO's other end to release it and fails.
+TEST(SharedMemoryObject, FifosAndSymbolicLinksAreRefusedAtOnceNamingTheObject) {
+  const std::string name = "/outcore-test-special-" + std::to_string(getpid());
+  const std::string path = "/dev/shm" + name;
+  const auto refused_promptly = [&](const char* what, bool fifo, auto call) {
+    auto done = std::make_shared<std::promise<Status>>();
+    std::future<Status> result = done->get_future();
+    std::thread caller([done, call] { done->set_value(call()); });
+    const bool prompt = result.wait_for(std::chrono::seconds(5)) == std::future_status::ready;
+    if (!prompt && fifo) {
+      const int writer = ::open(path.c_str(), O_WRONLY | O_NONBLOCK);
+      if (writer >= 0) ::close(writer);
+    }
+    caller.join();
+    const Status status = result.get();
+    EXPECT_TRUE(prompt) << what << " blocked on " << path;
+    EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << what << ": " << status.to_string();
+    EXPECT_NE(status.message().find(name), std::string::npos) << what << ": " << status.message();
+  };
+  ::unlink(path.c_str());
+  ASSERT_EQ(mkfifo(path.c_str(), 0600), 0) << std::strerror(errno);
+  refused_promptly("identify(FIFO)", true, [&] { return SharedMemoryObject::identify(name).status(); });
+  refused_promptly("open(FIFO)", true, [&] { return SharedMemoryObject::open(name).status(); });
+  ::unlink(path.c_str());
+
+  auto target = SharedMemoryObject::create("test", 4096);
+  ASSERT_TRUE(target.ok()) << target.status().message();
+  ASSERT_EQ(symlink(("/dev/shm" + target->name()).c_str(), path.c_str()), 0) << std::strerror(errno);
+  refused_promptly("identify(symlink)", false, [&] { return SharedMemoryObject::identify(name).status(); });
+  refused_promptly("open(symlink)", false, [&] { return SharedMemoryObject::open(name).status(); });
+  ::unlink(path.c_str());
 }
 
 TEST(SharedMemoryObject, RangesOutsideTheObjectAreOutOfRangeAndCopyNothing) {
