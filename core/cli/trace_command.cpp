@@ -3,16 +3,18 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <fstream>
 #include <limits>
 #include <memory>
 #include <optional>
+#include <string>
+#include <string_view>
 
 #include "core/cli/commands.h"
 #include "core/cli/subtree_options.h"
 #include "core/io/npy.h"
 #include "core/query/query_engine.h"
 #include "core/query/spawn_origin.h"
+#include "core/util/atomic_file.h"
 
 namespace outcore {
 
@@ -178,15 +180,17 @@ int run_trace(const TraceArgs& args) {
     if (!spawned.ok()) return report_command_error("trace", spawned.message());
   }
   if (!args.stats_json_path.empty()) {
-    std::ofstream out(args.stats_json_path);
+    std::string json;
     if (runs.size() == 1) {
-      out << runs[0].to_json() << "\n";
+      json = runs[0].to_json() + "\n";
     } else {
-      out << "[";
-      for (size_t r = 0; r < runs.size(); ++r) out << (r ? "," : "") << runs[r].to_json();
-      out << "]\n";
+      json = "[";
+      for (size_t r = 0; r < runs.size(); ++r) json += (r ? "," : "") + runs[r].to_json();
+      json += "]\n";
     }
-    if (!out) return report_command_error("trace", "cannot write " + args.stats_json_path);
+    const std::string_view parts[] = {json};
+    const Status saved = write_file_atomically(args.stats_json_path, parts);
+    if (!saved.ok()) return report_command_error("trace", saved.message());
   }
   return 0;
 }
