@@ -138,7 +138,10 @@ Expected<MappedFile> MappedFile::copy(const std::string& path) {
   file.identity_ = identity_of(info);
   const auto size = static_cast<std::size_t>(info.st_size);
   if (size > 0) {
-    void* data = mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    // MAP_POPULATE: the pages are about to be written whole; allocating them
+    // in one call is cheaper than a fault per page during the read.
+    void* data =
+        mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_POPULATE, -1, 0);
     if (data == MAP_FAILED) {
       const int error = errno;
       ::close(*fd);
@@ -169,6 +172,11 @@ Status MappedFile::read_again(const std::string& path) {
                                std::to_string(size_));
   }
   identity_ = now;
+#ifdef MADV_POPULATE_WRITE
+  // As MAP_POPULATE in copy(): released pages come back in one call, not a
+  // fault each (about a quarter of a 2 MB read); a hint (Linux >= 5.14).
+  (void)madvise(const_cast<char*>(data_), size_, MADV_POPULATE_WRITE);
+#endif
   const Status read = read_whole(*fd, const_cast<char*>(data_), size_, path);
   ::close(*fd);
   return read;
