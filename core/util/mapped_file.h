@@ -17,8 +17,9 @@
 // next read maps no memory (no write on the process's mapping lock).
 // identity() tells whether a path still names the same, unmodified file.
 //
-// Thread-safety: open() is reentrant; a mapped file is immutable and may be
-// read from many threads.
+// Thread-safety: open() and copy() are reentrant; the bytes may be read from
+// many threads, and change only by read_again(), which needs its caller to
+// be their only user (the subtree tier makes sure of it).
 #pragma once
 
 #include <cstddef>
