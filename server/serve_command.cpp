@@ -223,6 +223,7 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--stream-group-rays", args->stream_group_rays,
                   "Most rays of a stream traced in one engine call (chunks that queued up while the "
                   "engine was busy are traced together); 0: 1024 per brick of the store")
+      ->check(CLI::Range(int64_t{0}, std::numeric_limits<int64_t>::max()))
       ->capture_default_str();
   cmd->add_option("--stream-gather-ms", args->stream_gather_ms,
                   "Before tracing, wait for a stream's chunks while they come at most this many ms apart, "
