@@ -253,25 +253,31 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("scene", args->scene, "Scene store directory")->required();
   cmd->add_option("--listen", args->listen, "HOST:PORT to listen on (port 0: any free port)")
       ->capture_default_str();
-  cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
+  cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")
+      ->capture_default_str()
+      ->check(CLI::Range(uint64_t{1}, std::numeric_limits<uint64_t>::max() >> 20));
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
   add_subtree_options(*cmd, args->subtree);
   cmd->add_flag("--no-proxies", args->no_proxies, "Do not skip bricks by their occupancy proxies");
   cmd->add_option("--proxy-res", args->proxy_res,
                   "Proxy voxels along each brick's longest side (default 32)");
-  cmd->add_option("--threads", args->threads, "Engine worker threads (default: all cores)");
+  cmd->add_option("--threads", args->threads, "Engine worker threads (default: all cores)")
+      ->check(CLI::Range(0, 65536));
   cmd->add_option("--rpc-threads", args->rpc_threads, "Most threads serving calls at once")
+      ->check(CLI::Range(2, 65536))
       ->capture_default_str();
   cmd->add_option("--max-message-mb", args->max_message_mb, "Largest message either way, MiB")
       ->capture_default_str();
   cmd->add_option("--stream-group-rays", args->stream_group_rays,
                   "Most rays of a stream traced in one engine call (chunks that queued up while the "
                   "engine was busy are traced together); 0: 1024 per brick of the store")
+      ->check(CLI::Range(int64_t{0}, std::numeric_limits<int64_t>::max()))
       ->capture_default_str();
   cmd->add_option("--stream-gather-ms", args->stream_gather_ms,
                   "Before tracing, wait for a stream's chunks while they come at most this many ms apart, "
                   "up to --stream-group-rays; -1: 50 when the cache cannot hold the scene, else 0")
+      ->check(CLI::Range(int64_t{-1}, int64_t{60'000}))
       ->capture_default_str();
   cmd->add_flag("--no-shared-payloads", args->no_shared_payloads,
                 "Refuse shared-memory payloads (same-host clients then send rays and get hits over gRPC)");

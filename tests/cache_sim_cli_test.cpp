@@ -164,5 +164,61 @@ TEST_F(CacheSimCliTest, ErrorsNameWhatIsWrong) {
   EXPECT_TRUE(contains(r.stderr_text, "skipping budget fraction")) << r.stderr_text;
 }
 
+// Issue 21, finding 9: byte counts near 2^63 wrapped the replay's sums (an
+// empty or nonsense table, exit 0). Each is now an error naming the line and
+// the value; budgets that would overflow name the option and value; and a
+// trace at the edge of the limit still replays with the right figures.
+TEST_F(CacheSimCliTest, HugeByteCountsAreErrorsNamingTheLineAndValue) {
+  const auto write_trace = [&](const std::string& name, const std::string& records) {
+    std::ofstream out(file(name));
+    out << "# outcore brick access trace, version 2\n"
+           "seq,brick,bytes,reserved_bytes,build_seconds,outcome\n"
+        << records;
+    return file(name);
+  };
+  const std::string two63 = "9223372036854775808";  // 2^63
+  struct Case {
+    std::vector<std::string> args;
+    std::string expected;
+  };
+  const std::vector<Case> cases = {
+      {{"cache-sim", write_trace("huge.csv", "0,1," + two63 + ",0,0.5,miss\n")},
+       "huge.csv:3: bytes " + two63 + " is more than 4611686018427387904 (2^62)"},
+      {{"cache-sim", write_trace("huge_reserve.csv", "0,1,100,18446744073709551615,0.5,miss\n")},
+       "huge_reserve.csv:3: reserved_bytes 18446744073709551615 is more than"},
+      // Two bricks of just over 2^61 bytes: the sum passes 2^62 at the second record.
+      {{"cache-sim",
+        write_trace("sum.csv", "0,0,2305843009213693952,0,0.5,miss\n1,1,2305843009213693953,0,0.5,miss\n")},
+       "sum.csv:4: bytes 2305843009213693953 brings the trace's byte counts to more than "
+       "4611686018427387904"},
+      {{"cache-sim", write_trace("small.csv", "0,0,1000,0,0.5,miss\n"), "--budget-mb", "1e300"},
+       "--budget-mb 1e+300 is more than 4.39805e+12 MiB"},
+      {{"cache-sim", file("small.csv"), "--budget-mb", "1e-12"}, "--budget-mb 1e-12 is less than one byte"},
+      {{"cache-sim", file("small.csv"), "--budget-fractions", "1e16"},
+       "--budget-fractions 1e+16 of the working set (1000 bytes) is more than 2^62 bytes"},
+  };
+  for (const Case& c : cases) {
+    const SubprocessResult r = outcore(c.args);
+    EXPECT_EQ(r.exit_code, 1) << r.describe();
+    EXPECT_TRUE(contains(r.stderr_text, c.expected)) << r.stderr_text << "\nwanted: " << c.expected;
+    EXPECT_FALSE(contains(r.stdout_text, "budget_MiB")) << "no table on an error\n" << r.stdout_text;
+  }
+
+  // 2^60-byte bricks (four fit under the limit with their reservations):
+  // sums of them are exact, so a budget of one brick misses every request of
+  // an alternating trace and a budget of two misses only the first two.
+  const std::string edge = write_trace("edge.csv",
+                                       "0,0,1152921504606846976,0,1,miss\n"
+                                       "1,1,1152921504606846976,0,1,miss\n"
+                                       "2,0,1152921504606846976,0,0,hit\n"
+                                       "3,1,1152921504606846976,0,0,hit\n");
+  const SubprocessResult r =
+      outcore({"cache-sim", edge, "--policy", "lru", "--budget-fractions", "0.5,1", "--json"});
+  ASSERT_TRUE(r.succeeded()) << r.describe();
+  EXPECT_EQ(json_number_for(r.stdout_text, "lru", "misses", 0), 4) << r.stdout_text;
+  EXPECT_EQ(json_number_for(r.stdout_text, "lru", "misses", 1), 2) << r.stdout_text;
+  EXPECT_EQ(json_number_for(r.stdout_text, "lru", "budget_bytes", 1), 2305843009213693952.0) << r.stdout_text;
+}
+
 }  // namespace
 }  // namespace outcore

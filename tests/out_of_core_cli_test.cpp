@@ -5,7 +5,8 @@
 // stays within the budget plus the fixed overhead docs/BENCHMARKS.md states,
 // while the unlimited run's does not (so the bound says something). Both
 // ways bricks live in memory: Embree bricks built on the heap, and bvh bricks
-// loaded from the subtree tier as mapped files (released on eviction).
+// loaded from the subtree tier as copies of their files (released on
+// eviction).
 #include <gtest/gtest.h>
 
 #include <chrono>

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <string>
@@ -32,7 +33,13 @@ struct QueryArgs {
 };
 
 int run_query(const QueryArgs& args) {
-  if (args.deadline_seconds < 0) return report_command_error("query", "--deadline-s must be >= 0 (0: none)");
+  // NaN compares false both ways: it would pass a plain `< 0` test as "no deadline".
+  if (!std::isfinite(args.deadline_seconds) || args.deadline_seconds < 0) {
+    char given[32];
+    std::snprintf(given, sizeof(given), "%g", args.deadline_seconds);
+    return report_command_error("query",
+                                std::string("--deadline-s must be a number >= 0 (0: none), got ") + given);
+  }
   auto rays = read_rays_npy(args.rays_path);
   if (!rays.ok()) return report_command_error("query", rays.status().message());
   client::ConnectOptions connect_options;
@@ -99,9 +106,10 @@ void add_query_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--strict", args->strict, "Invalid rays are an error naming the first one (default: misses)");
   cmd->add_flag("--no-reorder", args->no_reorder, "Server traces rays one by one in input order");
   cmd->add_option(
-      "--chunk-rays", args->chunk_rays,
-      "Rays per message (default: as many as the server's max message size allows); larger batches "
-      "are streamed");
+         "--chunk-rays", args->chunk_rays,
+         "Rays per message (default: as many as the server's max message size allows); larger batches "
+         "are streamed")
+      ->check(CLI::Range(uint64_t{0}, uint64_t{1} << 40));
   cmd->add_flag("--no-shared-memory", args->no_shared_memory,
                 "Send rays and get hits over gRPC even when the server is on this host (default: batches "
                 "of 16,384 rays or more go through shared memory then)");

@@ -140,6 +140,7 @@ Expected<AccessTrace> read_access_trace(const std::string& path) {
   bool saw_version = false, saw_columns = false;
   bool has_pending_hint = false;
   std::vector<uint32_t> pending_hint;
+  uint64_t total_bytes = 0;  // of every record's bytes and reserved_bytes, <= kMaxTraceBytes
   const auto where = [&] { return path + ":" + std::to_string(reader.line_number()) + ": "; };
   while (reader.next_line(line)) {
     line = trim(line);
@@ -226,6 +227,17 @@ Expected<AccessTrace> read_access_trace(const std::string& path) {
       return invalid_argument(where() + "bad bytes '" + std::string(fields[2]) + "'");
     if (!parse_unsigned(fields[3], r.reserved_bytes))
       return invalid_argument(where() + "bad reserved_bytes '" + std::string(fields[3]) + "'");
+    // Each term is checked before the sum, so neither it nor the sum wraps.
+    for (const auto& [name, value] :
+         {std::pair{"bytes", r.bytes}, std::pair{"reserved_bytes", r.reserved_bytes}}) {
+      if (value > kMaxTraceBytes - total_bytes) {
+        return invalid_argument(
+            where() + std::string(name) + " " + std::to_string(value) +
+            (value > kMaxTraceBytes ? " is more than " : " brings the trace's byte counts to more than ") +
+            std::to_string(kMaxTraceBytes) + " (2^62), beyond any real cache");
+      }
+      total_bytes += value;
+    }
     if (parse_real(fields[4], r.build_seconds) != NumberParse::kOk || !std::isfinite(r.build_seconds) ||
         r.build_seconds < 0)
       return invalid_argument(where() + "bad build_seconds '" + std::string(fields[4]) + "'");

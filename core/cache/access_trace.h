@@ -32,6 +32,12 @@
 // engine gave the policy before that request (schedule-aware policies use
 // it); being a comment line, CSV readers skip it.
 //
+// The reader bounds byte counts so that replays never overflow: every
+// record's bytes and reserved_bytes, summed over the whole trace, stay within
+// kMaxTraceBytes (2^62; a real trace is many orders of magnitude below it).
+// Any sum a replay forms (working set, resident bytes plus a reservation,
+// bytes built) is then exact in 64 bits.
+//
 // Thread-safety: AccessTraceWriter::append/close may be called from any thread
 // (one mutex, never taken under the cache's lock); the reader is a function.
 #pragma once
@@ -80,6 +86,9 @@ struct AccessTrace {
 };
 
 inline constexpr int kAccessTraceVersion = 2;
+// The most bytes a trace's records may count in all (see above), and the
+// largest cache budget a replay accepts.
+inline constexpr uint64_t kMaxTraceBytes = uint64_t{1} << 62;
 inline constexpr int kOldestAccessTraceVersion = 1;  // still read
 
 class AccessTraceWriter {

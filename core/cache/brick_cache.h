@@ -22,10 +22,11 @@
 //   the brick is loaded from the tier's directory when it holds a valid file,
 //   else loaded from the store, built and saved to the tier, by the thread
 //   that missed (outside the lock; acquirers of the same brick wait for the
-//   save too). Either way the cache keeps the tier's file mapped in place
-//   (nothing copied to the heap; eviction unmaps it) unless the save failed.
-//   A loaded brick is accounted exactly as a built one (the serialiser
-//   guarantees the same memory_bytes(), which covers the mapping).
+//   save too). Either way the cache keeps the tier's copy of the file, read
+//   in place (a mapping of its own, not the heap; eviction releases it),
+//   unless the save failed. A loaded brick is accounted exactly as a built
+//   one (the serialiser guarantees the same memory_bytes(), which covers
+//   the copy).
 // - Counters: hits + misses counts successful acquisitions; failed ones are in
 //   neither. builds, bytes_built and build_seconds count successful builds;
 //   misses served by the tier are in subtree.loads instead (so, once idle,

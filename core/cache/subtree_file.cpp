@@ -17,12 +17,12 @@
 namespace outcore {
 namespace {
 
-// The accel's hold on a mapped subtree file. When someone else keeps the
-// mapping too (the tier, to load the brick again without mapping it again),
-// dropping the lease releases the pages the accel read (through the tier's
-// PageReleaseQueue when it has one, else MappedFile::release_pages at once),
-// so an evicted brick holds no RSS; otherwise dropping the last holder
-// unmaps the file.
+// The accel's hold on a subtree file's copy. When someone else keeps the
+// copy too (the tier, to read the brick into it again without mapping new
+// memory), dropping the lease releases the pages the accel read (through the
+// tier's PageReleaseQueue when it has one, else MappedFile::release_pages at
+// once), so an evicted brick holds no RSS; otherwise dropping the last
+// holder unmaps the copy.
 struct SubtreeMappingLease {
   SubtreeMappingLease(std::shared_ptr<const MappedFile> mapped, std::shared_ptr<PageReleaseQueue> queue)
       : file(std::move(mapped)), release_queue(std::move(queue)) {}
@@ -122,15 +122,28 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
                                     const BrickSerializer& serializer,
                                     const std::optional<FileIdentity>& trusted,
-                                    std::shared_ptr<PageReleaseQueue> release_queue) {
-  Expected<MappedFile> mapped = MappedFile::open(path);
-  if (!mapped.ok()) {
-    if (mapped.status().code() == StatusCode::kNotFound) return SubtreeReadResult{};
-    return rejected(SubtreeRejection::kCorrupt, path, mapped.status().message());
+                                    std::shared_ptr<PageReleaseQueue> release_queue,
+                                    std::shared_ptr<MappedFile> reuse) {
+  std::shared_ptr<MappedFile> file;
+  if (reuse != nullptr) {
+    Status again = reuse->read_again(path);
+    if (again.ok()) {
+      file = std::move(reuse);
+    } else if (again.code() != StatusCode::kFailedPrecondition) {  // another size: a new copy below
+      if (again.code() == StatusCode::kNotFound) return SubtreeReadResult{};
+      return rejected(SubtreeRejection::kCorrupt, path, again.message());
+    }
   }
-  const FileIdentity identity = mapped->identity();
+  if (file == nullptr) {
+    Expected<MappedFile> copied = MappedFile::copy(path);
+    if (!copied.ok()) {
+      if (copied.status().code() == StatusCode::kNotFound) return SubtreeReadResult{};
+      return rejected(SubtreeRejection::kCorrupt, path, copied.status().message());
+    }
+    file = std::make_shared<MappedFile>(std::move(copied).value());
+  }
+  const FileIdentity identity = file->identity();
   const bool known_good = trusted.has_value() && *trusted == identity;
-  auto file = std::make_shared<const MappedFile>(std::move(mapped).value());
   const std::span<const char> bytes = file->bytes();
   if (bytes.size() < kPreambleBytes + kTrailerBytes) {
     return rejected(SubtreeRejection::kCorrupt, path,
@@ -146,14 +159,14 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
                     "format version " + std::to_string(version) + ", this build reads version " +
                         std::to_string(kSubtreeFormatVersion));
   }
+  // Always, known good or not: a file of the same identity may still have
+  // been written in place (mtime restored, or within its granularity), and
+  // these bytes are what rays will read.
   const std::size_t checked = bytes.size() - kTrailerBytes;
-  if (!known_good) {
-    file->will_need();
-    uint64_t stored = 0;
-    std::memcpy(&stored, bytes.data() + checked, sizeof(stored));
-    if (checksum64(bytes.data(), checked) != stored) {
-      return rejected(SubtreeRejection::kCorrupt, path, "checksum mismatch (truncated or altered)");
-    }
+  uint64_t stored = 0;
+  std::memcpy(&stored, bytes.data() + checked, sizeof(stored));
+  if (checksum64(bytes.data(), checked) != stored) {
+    return rejected(SubtreeRejection::kCorrupt, path, "checksum mismatch (truncated or altered)");
   }
   const std::span<const char> body = bytes.subspan(kPreambleBytes, checked - kPreambleBytes);
   SubtreeKey found;

@@ -22,10 +22,14 @@
 // file from another store, or from before a repack, is never used unless the
 // brick is bitwise the same, when the structure is too) and the same
 // structure key (structure, payload version and every option). Anything else
-// is a rejection with a reason; the caller rebuilds. A caller that knows the
-// mapped file is one it wrote or fully checked before, unchanged since
-// (same FileIdentity), may skip the checksum and the serialiser's structural
-// checks (known_good): a reload then costs a mapping and a header check.
+// is a rejection with a reason; the caller rebuilds.
+//
+// A file is read into memory of its own (MappedFile::copy) and its checksum
+// verified on that copy at every read, so a file truncated or overwritten
+// later, even while its brick is traversed, never reaches a ray. A caller
+// that knows the file is one it wrote or fully checked before, unchanged
+// since (same FileIdentity), may skip the serialiser's structural checks
+// (known_good): the checksum then proves the bytes are those checked.
 //
 // Thread-safety: functions of their arguments; concurrent calls on different
 // paths are independent.
@@ -75,9 +79,9 @@ const char* subtree_rejection_name(SubtreeRejection rejection);
 
 struct SubtreeReadResult {
   std::unique_ptr<BrickAccel> accel;  // set when rejection == kNone
-  // When loaded: the mapping and the payload's bytes in it, for
+  // When loaded: the file's copy and the payload's bytes in it, for
   // load_subtree_payload() to load the brick again.
-  std::shared_ptr<const MappedFile> file;
+  std::shared_ptr<MappedFile> file;
   std::span<const char> payload;
   SubtreeRejection rejection = SubtreeRejection::kAbsent;
   std::string message;  // why, naming the file, when rejected (not when absent)
@@ -92,21 +96,24 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
                           const BrickAccel& accel, uint64_t* file_bytes);
 
 // Reads `path` if it holds `key`; never throws. The loaded accel keeps the
-// file mapped and reads it in place. `trusted`: the identity of a file the
+// file's copy and reads it in place. `trusted`: the identity of a file the
 // caller wrote or checked in full before; when the file at `path` still has
-// it, it is known good (see above) and only its header is checked.
-// `release_queue`: where the accel, once dropped while someone else still
-// holds the mapping, queues its pages for release (nullptr: released at
-// once).
+// it, it is known good (see above): the checksum is verified, the structure
+// is not. `release_queue`: where the accel, once dropped while someone else
+// still holds the copy, queues its pages for release (nullptr: released at
+// once). `reuse`: a copy of an earlier read of this path that nobody else
+// holds (use_count 1), read again in place when the file kept its size, so
+// the load maps no memory; otherwise a new copy is made.
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
                                     const BrickSerializer& serializer,
                                     const std::optional<FileIdentity>& trusted = std::nullopt,
-                                    std::shared_ptr<PageReleaseQueue> release_queue = nullptr);
+                                    std::shared_ptr<PageReleaseQueue> release_queue = nullptr,
+                                    std::shared_ptr<MappedFile> reuse = nullptr);
 
 // Loads again, in place and without checks, a payload read_subtree_file()
-// loaded from `file` before (the file's bytes cannot have changed under the
-// mapping: the tier never writes a file in place). nullptr when the
-// serialiser refuses it (it never should).
+// loaded into `file` before, whose pages were not released since (the copy
+// is this process's own memory: nothing outside can change it). nullptr when
+// the serialiser refuses it (it never should).
 std::unique_ptr<BrickAccel> load_subtree_payload(const std::shared_ptr<const MappedFile>& file,
                                                  std::span<const char> payload, const SubtreeKey& key,
                                                  const BrickSerializer& serializer,

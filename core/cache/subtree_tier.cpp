@@ -99,42 +99,48 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
   const std::string path = path_of(key);
   const auto start = Clock::now();
   std::optional<FileIdentity> trusted;
-  std::shared_ptr<const MappedFile> kept;
+  // The kept copy, taken out of the index: while this load holds it, no
+  // other load can read it or read into it.
+  std::shared_ptr<MappedFile> kept;
   std::span<const char> kept_payload;
   {
     std::lock_guard lock(mutex_);
     const auto it = files_.find(name);
     if (it != files_.end()) {
       trusted = it->second.known_good;
-      kept = it->second.mapping;
-      kept_payload = it->second.payload;
+      if (it->second.mapping != nullptr) {
+        kept = std::move(it->second.mapping);
+        kept_payload = std::exchange(it->second.payload, {});
+        --kept_mappings_;
+      }
     }
   }
-  // The kept mapping serves while the path still names the file it maps,
-  // unchanged (an edited, replaced or deleted file goes the full way).
-  const auto kept_still_valid = [&] {
-    if (kept == nullptr || !trusted.has_value() || !(kept->identity() == *trusted)) return false;
-    const Expected<FileIdentity> now = file_identity(path);
-    return now.ok() && *now == *trusted;
-  };
-  if (kept_still_valid()) {
-    // Its pages may still be queued for release: keep them instead.
-    if (release_queue_ != nullptr) release_queue_->cancel(kept.get());
-    std::unique_ptr<BrickAccel> accel =
-        load_subtree_payload(kept, kept_payload, key, serializer_, release_queue_);
-    if (accel != nullptr) {
-      const double seconds = seconds_since(start);
-      std::lock_guard lock(mutex_);
-      ++counters_.loads;
-      ++counters_.loads_kept;
-      counters_.bytes_read += kept->bytes().size();
-      counters_.load_seconds += seconds;
-      const auto it = files_.find(name);
-      if (it != files_.end()) it->second.last_use = ++use_clock_;
-      return accel;
+  if (kept != nullptr) {
+    // Still queued for release: its pages, hence its checked bytes, are
+    // intact, and they are our own memory, so the file's state is moot.
+    const bool intact = release_queue_ != nullptr && release_queue_->cancel(kept.get());
+    if (kept.use_count() != 1) {
+      kept.reset();  // a brick or a release batch still reads it: not ours to reuse
+    } else if (intact) {
+      std::unique_ptr<BrickAccel> accel =
+          load_subtree_payload(kept, kept_payload, key, serializer_, release_queue_);
+      if (accel != nullptr) {
+        const double seconds = seconds_since(start);
+        std::lock_guard lock(mutex_);
+        ++counters_.loads;
+        ++counters_.loads_kept;
+        counters_.bytes_read += kept->bytes().size();
+        counters_.load_seconds += seconds;
+        const auto it = files_.find(name);
+        if (it != files_.end()) it->second.last_use = ++use_clock_;
+        keep_mapping_locked(name, kept, kept_payload);
+        return accel;
+      }
     }
   }
-  SubtreeReadResult read = read_subtree_file(path, key, serializer_, trusted, release_queue_);
+  const bool reused = kept != nullptr;
+  SubtreeReadResult read =
+      read_subtree_file(path, key, serializer_, trusted, release_queue_, std::move(kept));
   const double seconds = seconds_since(start);
 
   std::lock_guard lock(mutex_);
@@ -142,6 +148,7 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
     case SubtreeRejection::kNone: {
       ++counters_.loads;
       if (read.checked) ++counters_.loads_checked;
+      if (reused) ++counters_.loads_kept;
       counters_.bytes_read += read.file_bytes;
       counters_.load_seconds += seconds;
       const auto it = files_.find(name);
@@ -149,7 +156,7 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
         it->second.last_use = ++use_clock_;
         it->second.known_good = read.identity;
       }
-      keep_mapping_locked(name, read);
+      keep_mapping_locked(name, read.file, read.payload);
       return std::move(read.accel);
     }
     case SubtreeRejection::kAbsent:
@@ -229,20 +236,21 @@ std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const Bric
   SubtreeReadResult read = read_subtree_file(path_of(key), key, serializer_, ours, release_queue_);
   if (read.accel != nullptr) {
     lock.lock();
-    keep_mapping_locked(name, read);
+    keep_mapping_locked(name, read.file, read.payload);
   }
   return std::move(read.accel);
 }
 
-void SubtreeTier::keep_mapping_locked(const std::string& name, const SubtreeReadResult& read) {
+void SubtreeTier::keep_mapping_locked(const std::string& name, const std::shared_ptr<MappedFile>& file,
+                                      std::span<const char> payload) {
   const auto it = files_.find(name);
-  if (it == files_.end() || read.file == nullptr || it->second.mapping == read.file) return;
+  if (it == files_.end() || file == nullptr || it->second.mapping == file) return;
   if (it->second.mapping == nullptr) {
     if (kept_mappings_ >= kMaxKeptMappings) return;
     ++kept_mappings_;
   }
-  it->second.mapping = read.file;
-  it->second.payload = read.payload;
+  it->second.mapping = file;
+  it->second.payload = payload;
 }
 
 void SubtreeTier::evict_locked(uint64_t incoming) {

@@ -7,11 +7,11 @@
 // - Written on build, not on eviction: the building thread is off the
 //   cache's lock, the file is there for the next process too, and evicting
 //   (which happens while another thread waits for room) stays as cheap as
-//   before. store() then hands back the written file mapped in place, which
-//   the cache keeps instead of the built copy: every resident brick is then
-//   page-cache pages that eviction unmaps, so the allocator never holds freed
-//   brick memory next to mapped bricks (process RSS stays within the budget
-//   plus a fixed overhead). Each brick is written once per directory (a brick
+//   before. store() then hands back the written file loaded (a copy, below),
+//   which the cache keeps instead of the heap build: every resident brick is
+//   then a mapping of its own that eviction releases, so the allocator never
+//   holds freed brick memory next to them (process RSS stays within the
+//   budget plus a fixed overhead). Each brick is written once per directory (a brick
 //   the tier knows is on disk is not written again).
 // - Atomic: a file is written under a temporary name in the directory and
 //   renamed into place, so readers (of this or another process) see a whole
@@ -30,27 +30,29 @@
 // - A file that is corrupt, truncated, of another version or stale (another
 //   key under the expected name) is counted by reason, logged, deleted, and
 //   the caller builds instead: never a wrong answer.
-// - Loads are in place: the loaded accel reads the mapped file (the page
-//   cache's pages, faulted in as traversal touches them) and unmaps it when
-//   the cache evicts it, so the cache's budget still bounds what the process
-//   holds. A file is checked in full (checksum, structure) the first time this tier loads it;
-//   later loads of the same, unchanged file (same FileIdentity: inode, size,
-//   modification time), and loads of files this tier wrote, skip those checks
-//   and cost a mapping and a header check. A file replaced by another
-//   process (a new inode) is checked again.
-// - Mappings are kept (up to kMaxKeptMappings): a loaded or written file
-//   stays mapped after the cache evicts its brick, with its pages released
-//   (MappedFile::release_pages: they leave the RSS, the page cache keeps
-//   them), and the next load of that brick reuses the mapping while the path
-//   still names that file unchanged (one stat): no open, no mmap, no header
-//   check. Released pages are batched (PageReleaseQueue, release_batch_bytes
-//   of mappings at most, flushed at the end of each query batch), and a
-//   queued mapping loaded again is taken out of the queue with its pages.
-//   Mapping and unmapping take the process's mapping
-//   lock for writing, which stalls every other thread's page faults; a warm
-//   batch at a quarter budget loads thousands of bricks. A kept mapping is
-//   dropped when this tier deletes the file or forgets it, and not used when
-//   the file was replaced, edited or deleted since (it is then read again).
+// - Loads copy: a file is read into memory of this process's own (a private
+//   anonymous mapping, MappedFile::copy) and its checksum verified on that
+//   copy at every read; the loaded accel reads the copy in place. The
+//   directory is outside this process's control (another process or user may
+//   truncate or overwrite a file in place while its brick is traversed): a
+//   damaged file costs a rebuild, never the process nor a wrong answer. The
+//   structural checks run the first time this tier loads a file; later loads
+//   of the same, unchanged file (same FileIdentity: inode, size, modification
+//   time), and loads of files this tier wrote, skip them (the checksum proves
+//   the bytes are those checked). A file replaced by another process (a new
+//   inode) is checked again. The cost against reading the file in place
+//   (mapped): a copy and a checksum a load (docs/CACHE_TUNING.md).
+// - Copies are kept (up to kMaxKeptMappings): a loaded or written file's
+//   copy stays mapped after the cache evicts its brick, with its pages
+//   released (MappedFile::release_pages: they leave the RSS), and the next
+//   load of that brick reads the file again into the same memory: no mmap or
+//   munmap, which take the process's mapping lock for writing and stall
+//   every other thread's page faults (a warm batch at a quarter budget loads
+//   thousands of bricks). Released pages are batched (PageReleaseQueue,
+//   release_batch_bytes of copies at most, flushed at the end of each query
+//   batch), and a queued copy loaded again is taken out of the queue with its
+//   pages: its bytes, checked and our own, are used without reading the file.
+//   A kept copy is dropped when this tier deletes the file or forgets it.
 //
 // Thread-safety: all member functions may be called from any thread; one
 // mutex guards the index and is held for renames and deletions, never while
@@ -145,7 +147,7 @@ class SubtreeTier {
     // The file as this tier wrote or last checked it in full.
     std::optional<FileIdentity> known_good;
     // That file kept mapped, and its payload, to load it again (see above).
-    std::shared_ptr<const MappedFile> mapping;
+    std::shared_ptr<MappedFile> mapping;
     std::span<const char> payload;
   };
 
@@ -155,9 +157,10 @@ class SubtreeTier {
   // bytes fit in the bound.
   void evict_locked(uint64_t incoming);
   void forget_locked(const std::string& name);
-  // Under the lock: keeps `read`'s mapping in the entry for `name`, if known
-  // and below the limit.
-  void keep_mapping_locked(const std::string& name, const SubtreeReadResult& read);
+  // Under the lock: keeps `file` (a loaded copy, `payload` in it) in the
+  // entry for `name`, if known and below the limit.
+  void keep_mapping_locked(const std::string& name, const std::shared_ptr<MappedFile>& file,
+                           std::span<const char> payload);
 
   const SubtreeTierOptions options_;
   const BrickSerializer& serializer_;

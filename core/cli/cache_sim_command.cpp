@@ -72,6 +72,13 @@ Expected<std::vector<std::string>> parse_policies(const std::string& text) {
   return names;
 }
 
+// %g: the number as the user would write it back.
+std::string format_number(double value) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%g", value);
+  return text;
+}
+
 double mib(uint64_t bytes) {
   return static_cast<double>(bytes) / 1048576.0;
 }
@@ -91,14 +98,31 @@ int run_cache_sim(const CacheSimArgs& args) {
   if (!args.budget_mb.empty()) {
     auto values = parse_list("--budget-mb", args.budget_mb);
     if (!values.ok()) return report_command_error(kCommand, values.status().message());
-    for (double v : *values) budgets.push_back(static_cast<uint64_t>(std::llround(v * 1048576.0)));
+    constexpr double kMaxMiB = static_cast<double>(kMaxTraceBytes >> 20);
+    for (double v : *values) {
+      // Checked before the conversion: llround of a value past 2^63 is undefined.
+      if (v > kMaxMiB) {
+        return report_command_error(kCommand, "--budget-mb " + format_number(v) + " is more than " +
+                                                  format_number(kMaxMiB) + " MiB (2^62 bytes)");
+      }
+      const auto budget = static_cast<uint64_t>(std::llround(v * 1048576.0));
+      if (budget == 0) {
+        return report_command_error(kCommand, "--budget-mb " + format_number(v) + " is less than one byte");
+      }
+      budgets.push_back(budget);
+    }
   } else {
     const bool defaulted = args.budget_fractions.empty();
     auto values = parse_list("--budget-fractions", defaulted ? kDefaultFractions : args.budget_fractions);
     if (!values.ok()) return report_command_error(kCommand, values.status().message());
     for (double v : *values) {
-      const auto budget =
-          static_cast<uint64_t>(std::llround(v * static_cast<double>(profile.working_set_bytes)));
+      const double bytes = v * static_cast<double>(profile.working_set_bytes);
+      if (bytes > static_cast<double>(kMaxTraceBytes)) {
+        return report_command_error(
+            kCommand, "--budget-fractions " + format_number(v) + " of the working set (" +
+                          std::to_string(profile.working_set_bytes) + " bytes) is more than 2^62 bytes");
+      }
+      const auto budget = static_cast<uint64_t>(std::llround(bytes));
       // Default fractions below what the largest brick needs are skipped, not errors.
       if (defaulted && budget < profile.largest_reservation) {
         std::fprintf(stderr,
@@ -110,6 +134,10 @@ int run_cache_sim(const CacheSimArgs& args) {
     }
     if (budgets.empty()) budgets.push_back(profile.largest_reservation);
   }
+  // Every path above yields a budget or an error; an empty table with exit
+  // status 0 would read as a successful replay.
+  if (budgets.empty())
+    return report_command_error(kCommand, "no cache budget to replay " + args.trace_path + " with");
   for (const uint64_t budget : budgets) {
     const Status fits = check_budget(*trace, profile, budget);
     if (!fits.ok()) return report_command_error(kCommand, fits.message());

@@ -4,6 +4,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cstdio>
+#include <limits>
 #include <memory>
 
 #include "core/cli/commands.h"
@@ -36,10 +37,12 @@ void add_pack_command(CLI::App& app, int& exit_code) {
       "Most triangles in one brick (default " + std::to_string(kDefaultBrickTriangles) +
           "; a scene of at most " + std::to_string(kSmallSceneTriangles) + " triangles is then one brick)");
   cmd->add_option("--mem-mb", options->memory_mb, "Peak memory bound for packing, MiB")
+      ->check(CLI::Range(uint64_t{1}, std::numeric_limits<uint64_t>::max() >> 20))
       ->capture_default_str();
   cmd->add_option("--vertex-mem-mb", options->vertex_memory_mb,
                   "Part of --mem-mb for OBJ/PLY vertex positions, MiB (0: an eighth); files with more "
                   "resolve their faces out of core")
+      ->check(CLI::Range(uint64_t{0}, std::numeric_limits<uint64_t>::max() >> 20))
       ->capture_default_str();
   cmd->add_flag("--force", options->overwrite,
                 "Replace an existing Outcore store at the output path (never anything else, nor an input)");

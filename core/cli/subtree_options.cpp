@@ -16,11 +16,13 @@ void add_subtree_options(CLI::App& command, SubtreeCliOptions& options) {
       .add_option("--subtree-dir-mb", options.dir_mb,
                   "Most MiB of brick files kept in --subtree-dir, least recently used deleted first (0: "
                   "unbounded)")
+      ->check(CLI::Range(uint64_t{0}, std::numeric_limits<uint64_t>::max() >> 20))
       ->capture_default_str();
   command
       .add_option("--subtree-release-batch-mb", options.release_batch_mb,
                   "Release the pages of evicted bricks loaded from --subtree-dir in batches of this many MiB "
                   "of mappings (held in RSS until released; 0: each brick at once; docs/CACHE_TUNING.md)")
+      ->check(CLI::Range(uint64_t{0}, std::numeric_limits<uint64_t>::max() >> 20))
       ->capture_default_str();
 }
 

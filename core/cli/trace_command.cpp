@@ -3,20 +3,26 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <fstream>
 #include <limits>
 #include <memory>
 #include <optional>
+#include <string>
+#include <string_view>
 
 #include "core/cli/commands.h"
 #include "core/cli/subtree_options.h"
 #include "core/io/npy.h"
 #include "core/query/query_engine.h"
 #include "core/query/spawn_origin.h"
+#include "core/util/atomic_file.h"
 
 namespace outcore {
 
 namespace {
+
+// Beyond any machine's cores; TBB would cap it anyway, but a typo (an extra
+// digit, a negative number) should be an error, not a silent default.
+constexpr int kMaxThreadsOption = 65536;
 
 struct TraceArgs {
   std::string scene;
@@ -150,7 +156,7 @@ int run_trace(const TraceArgs& args) {
   std::vector<QueryStats> runs;
   std::vector<uint8_t> occluded(args.any_hit ? rays->size() : 0);
   std::vector<Hit> hits(args.any_hit ? 0 : rays->size());
-  for (int r = 0; r < std::max(1, args.repeat); ++r) {
+  for (int r = 0; r < args.repeat; ++r) {
     QueryStats stats;
     const Status status = args.any_hit ? (*engine)->occluded(*rays, occluded, query_options, &stats)
                                        : (*engine)->intersect(*rays, hits, query_options, &stats);
@@ -178,15 +184,17 @@ int run_trace(const TraceArgs& args) {
     if (!spawned.ok()) return report_command_error("trace", spawned.message());
   }
   if (!args.stats_json_path.empty()) {
-    std::ofstream out(args.stats_json_path);
+    std::string json;
     if (runs.size() == 1) {
-      out << runs[0].to_json() << "\n";
+      json = runs[0].to_json() + "\n";
     } else {
-      out << "[";
-      for (size_t r = 0; r < runs.size(); ++r) out << (r ? "," : "") << runs[r].to_json();
-      out << "]\n";
+      json = "[";
+      for (size_t r = 0; r < runs.size(); ++r) json += (r ? "," : "") + runs[r].to_json();
+      json += "]\n";
     }
-    if (!out) return report_command_error("trace", "cannot write " + args.stats_json_path);
+    const std::string_view parts[] = {json};
+    const Status saved = write_file_atomically(args.stats_json_path, parts);
+    if (!saved.ok()) return report_command_error("trace", saved.message());
   }
   return 0;
 }
@@ -201,7 +209,11 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_option("-o,--output", args->output_path, "Hits .npy to write (bool .npy with --any-hit)")
       ->required();
   cmd->add_flag("--any-hit", args->any_hit, "Occlusion query: write whether each ray hits anything");
-  cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")->capture_default_str();
+  // A range check here names the value as given: "-1" would otherwise wrap
+  // to 2^64 - 1 before run_trace() sees it.
+  cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")
+      ->check(CLI::Range(uint64_t{1}, std::numeric_limits<uint64_t>::max() >> 20))
+      ->capture_default_str();
   cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
   cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
   add_subtree_options(*cmd, args->subtree);
@@ -230,10 +242,12 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--proxy-res", args->proxy_res,
                   "Proxy voxels along each brick's longest side (default 32; proxies.bin is rebuilt "
                   "when it has another)");
-  cmd->add_option("--threads", args->threads, "Worker threads (default: all cores)");
+  cmd->add_option("--threads", args->threads, "Worker threads (0, the default: all cores)")
+      ->check(CLI::Range(0, kMaxThreadsOption));
   cmd->add_flag("--stats", args->print_stats, "Print query statistics");
   cmd->add_option("--stats-json", args->stats_json_path, "Write query statistics as JSON to this file");
   cmd->add_option("--repeat", args->repeat, "Run the batch this many times (first cold, then warm)")
+      ->check(CLI::Range(1, 1000000))
       ->capture_default_str();
   cmd->add_option("--trace-out", args->trace_out, "Record every brick request to this CSV (for cache-sim)");
   cmd->add_option("--spawn-out", args->spawn_out,

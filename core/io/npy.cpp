@@ -6,6 +6,9 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <string_view>
+
+#include "core/util/atomic_file.h"
 
 namespace outcore {
 
@@ -83,14 +86,11 @@ std::string make_header(const std::string& descr, const std::vector<uint64_t>& s
   return header + dict;
 }
 
+// Under a temporary name, renamed into place: a failed write (disk full)
+// leaves any earlier file whole and no truncated one behind.
 Status write_file(const std::string& path, const std::string& header, const void* data, std::size_t bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) return io_error_from_errno("cannot create " + path);
-  out.write(header.data(), static_cast<std::streamsize>(header.size()));
-  out.write(static_cast<const char*>(data), static_cast<std::streamsize>(bytes));
-  out.flush();
-  if (!out) return io_error_from_errno("cannot write " + path);
-  return Status::Ok();
+  const std::string_view parts[] = {header, {static_cast<const char*>(data), bytes}};
+  return write_file_atomically(path, parts);
 }
 
 Expected<std::string> read_whole_file(const std::string& path) {

@@ -6,8 +6,13 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <bit>
 #include <cmath>
+#include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -21,6 +26,7 @@
 namespace outcore {
 namespace {
 
+using testing::read_file_bytes;
 using testing::TempDir;
 using testing::write_text_file;
 
@@ -484,6 +490,49 @@ TEST(NpyBools, ZeroFlagsWorkAndOtherDtypesAreRejected) {
   const auto wrong = read_bools_npy(rays);
   ASSERT_FALSE(wrong.ok());
   EXPECT_TRUE(contains(wrong.status().message(), rays)) << wrong.status().to_string();
+}
+
+// Issue 21, finding 7: a write that fails midway (disk full; here the
+// process's file size limit, which fails write() with EFBIG the same way)
+// must keep an earlier output whole and leave nothing else behind. Run in
+// a forked child so the limit does not touch this process.
+TEST(NpyWrite, AFailedWriteKeepsTheEarlierFileAndLeavesNoTemporary) {
+  TempDir dir;
+  const std::string path = dir.file("hits.npy");
+  const std::string earlier = "an earlier run's output";
+  write_text_file(path, earlier);
+  const std::vector<Hit> hits(100000);  // 3.2 MB, far past the limit below
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const rlimit limit{64 * 1024, 64 * 1024};
+    std::signal(SIGXFSZ, SIG_IGN);  // else the write kills the child instead of failing
+    if (::setrlimit(RLIMIT_FSIZE, &limit) != 0) ::_exit(3);
+    const Status written = write_hits_npy(path, hits);
+    ::_exit(written.ok() ? 1 : contains(written.message(), path) ? 0 : 2);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  ASSERT_TRUE(WIFEXITED(status)) << "the child died of signal " << WTERMSIG(status);
+  EXPECT_EQ(WEXITSTATUS(status), 0) << "1: the write succeeded, 2: its error does not name the file";
+  EXPECT_EQ(read_file_bytes(path), earlier) << "the earlier output must stay whole";
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path()))
+    names.push_back(entry.path().filename().string());
+  EXPECT_EQ(names, std::vector<std::string>{"hits.npy"}) << "no temporary left behind";
+
+  // Without the limit the same write replaces the earlier file.
+  ASSERT_TRUE(write_hits_npy(path, hits).ok());
+  const auto back = read_hits_npy(path);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_EQ(back->size(), hits.size());
+  // A device cannot be renamed over: it is written in place, and stays a device.
+  ASSERT_TRUE(write_hits_npy("/dev/null", hits).ok());
+  EXPECT_TRUE(std::filesystem::is_character_file("/dev/null"));
+  // A directory is an error naming it.
+  const Status on_directory = write_hits_npy(dir.path(), hits);
+  EXPECT_FALSE(on_directory.ok());
+  EXPECT_TRUE(contains(on_directory.message(), dir.path())) << on_directory.to_string();
 }
 
 }  // namespace

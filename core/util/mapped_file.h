@@ -1,18 +1,25 @@
-// MappedFile: a whole file mapped read-only (mmap) and read in place (subtree
-// tier entries): the kernel's page cache holds the bytes, not this process's
-// heap, and unmapping gives them back to it. Pages are mapped as they are
-// first read (a reader that touches only part of a file pays only for that
-// part); will_need() asks the kernel to read the whole file ahead for a
-// reader that will touch all of it. identity() tells whether a path still
-// names the same, unmodified file.
+// MappedFile: a whole file in memory of its own mapping, read in place, in
+// one of two kinds:
 //
-// Whoever maps a file must not let it be truncated or written in place while
-// mapped (reading a page past a truncation raises SIGBUS); the subtree tier
-// only ever replaces files by rename or unlinks them, which leaves existing
-// mappings intact.
+// - open(): the file mapped read-only (mmap). The kernel's page cache holds
+//   the bytes, not this process's heap; pages are mapped as they are first
+//   read. Whoever maps a file this way must be sure nobody truncates or
+//   writes it in place while mapped: reading a page past a truncation raises
+//   SIGBUS, and bytes written in place show through (MAP_PRIVATE copies only
+//   on our own writes).
+// - copy(): the file read into a private anonymous mapping. The bytes are
+//   this process's own: the file may then be truncated, overwritten or
+//   deleted without affecting them (the subtree tier, whose directory other
+//   processes and users may touch). Unmapping still gives the memory back to
+//   the system, not to the allocator.
 //
-// Thread-safety: open() is reentrant; a mapped file is immutable and may be
-// read from many threads.
+// release_pages() drops the pages from the RSS but keeps the mapping, so the
+// next read maps no memory (no write on the process's mapping lock).
+// identity() tells whether a path still names the same, unmodified file.
+//
+// Thread-safety: open() and copy() are reentrant; the bytes may be read from
+// many threads, and change only by read_again(), which needs its caller to
+// be their only user (the subtree tier makes sure of it).
 #pragma once
 
 #include <cstddef>
@@ -50,23 +57,36 @@ class MappedFile {
   // NOT_FOUND when the file does not exist, IO_ERROR for other failures.
   // An empty file maps to empty bytes.
   static Expected<MappedFile> open(const std::string& path);
+  // The file's bytes read into a private anonymous mapping. NOT_FOUND when
+  // the file does not exist; IO_ERROR for other failures, among them a file
+  // that shrank while being read.
+  static Expected<MappedFile> copy(const std::string& path);
+  // A copy() only: reads `path` again into the same memory (no mapping
+  // changes), e.g. after release_pages(). FAILED_PRECONDITION when the file
+  // now has another size (make a new copy instead), NOT_FOUND / IO_ERROR as
+  // copy(). Nobody may read the bytes meanwhile. On failure the bytes are
+  // undefined.
+  Status read_again(const std::string& path);
 
   std::span<const char> bytes() const { return {data_, size_}; }
   // A hint (MADV_WILLNEED) that all of the file is about to be read.
   void will_need() const;
   // Unmaps the pages read so far (MADV_DONTNEED) but keeps the mapping: they
-  // leave this process's RSS (the page cache keeps them) and are faulted in
-  // again, with the same bytes, when next read. Cheaper than unmapping and
+  // leave this process's RSS. A file mapping faults them in again, with the
+  // same bytes (the page cache keeps them), when next read; a copy's pages
+  // then read as zeros until read_again(). Cheaper than unmapping and
   // mapping again: no mapping changes, so other threads' page faults are not
   // held up by the process's mapping lock.
   void release_pages() const;
-  // The mapped file's identity when it was opened.
+  // The file's identity when it was opened or last read.
   const FileIdentity& identity() const { return identity_; }
+  bool is_copy() const { return copy_; }
 
  private:
   const char* data_ = nullptr;
   std::size_t size_ = 0;
   FileIdentity identity_;
+  bool copy_ = false;
 };
 
 }  // namespace outcore

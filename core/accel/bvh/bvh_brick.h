@@ -16,7 +16,7 @@
 //
 // Memory: memory_bytes() = the tree's arrays (32 B per node, 56 B per
 // triangle) + kOverheadBytes, whether the accel owns them (a build) or reads
-// them in place from a mapped subtree file (from_view(); kOverheadBytes also
+// them in place from a loaded subtree file (from_view(); kOverheadBytes also
 // covers such a file's header, padding, trailer and last partial page).
 // reserve_bytes(n) bounds it and the build peak (see bvh_brick.cpp).
 //
@@ -69,7 +69,7 @@ class BvhBrickAccel final : public BrickAccel {
   static std::unique_ptr<BvhBrickAccel> from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id,
                                                   uint32_t triangle_count);
   // A brick that reads a valid view in place; `owner` keeps the viewed bytes
-  // alive (e.g. a mapped subtree file) for as long as the accel lives.
+  // alive (e.g. a subtree file's copy) for as long as the accel lives.
   static std::unique_ptr<BvhBrickAccel> from_view(const BvhTreeView& view, std::shared_ptr<const void> owner,
                                                   TriangleTest test, uint32_t brick_id,
                                                   uint32_t triangle_count);

@@ -6,8 +6,8 @@
 // traversed by bvh_traversal.h; the tree itself knows neither.
 //
 // BvhTree owns its arrays (a build); BvhTreeView is what traversal reads: the
-// same three arrays as spans, over a BvhTree or over a subtree file mapped in
-// place (bvh_brick_serializer.h). validate() checks a view that came from a
+// same three arrays as spans, over a BvhTree or over a loaded subtree file,
+// read in place (bvh_brick_serializer.h). validate() checks a view that came from a
 // file before it is used, so a corrupt or hostile file is an error, never a
 // crash.
 //
