@@ -826,7 +826,9 @@ TEST_F(ServerApi, StreamGatherOutOfRangeIsRefused) {
   const SubprocessResult r = testing::run_outcore({"serve", store_, "--stream-gather-ms", "60001"},
                                                   std::chrono::milliseconds(30'000));
   EXPECT_NE(r.exit_code, 0);
-  EXPECT_TRUE(contains(r.stderr_text, "--stream-gather-ms must be at most 60000")) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "--stream-gather-ms")) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "60001")) << r.describe();
+  EXPECT_TRUE(contains(r.stderr_text, "60000")) << r.describe();
 }
 
 TEST_F(ServerApi, ClientCancellingMidStreamCostsOnlyItsOwnWork) {
