@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/proxy/proxy_grid.h"
+#include "core/util/atomic_file.h"
 #include "core/util/checksum.h"
 
 namespace outcore {
@@ -152,46 +153,13 @@ Status write_proxy_file(const std::string& directory, const ProxySet& set, uint6
   header.payload_bytes = payload.size();
   header.payload_checksum = checksum64(payload.data(), payload.size());
 
-  const std::string final_path = directory + "/" + kProxyFileName;
-  std::string temp_path = final_path + ".partial-XXXXXX";
-  const int fd = ::mkstemp(temp_path.data());
-  if (fd < 0) return io_error_from_errno("cannot create a temporary file beside " + final_path);
-  auto fail = [&](const std::string& what) {
-    const Status status = io_error_from_errno(what);
-    ::close(fd);
-    ::unlink(temp_path.c_str());
-    return status;
-  };
-  auto write_all = [&](const char* data, std::size_t size) {
-    while (size > 0) {
-      const ssize_t n = ::write(fd, data, size);
-      if (n < 0) {
-        if (errno == EINTR) continue;
-        return false;
-      }
-      data += n;
-      size -= static_cast<std::size_t>(n);
-    }
-    return true;
-  };
-  if (!write_all(reinterpret_cast<const char*>(&header), sizeof header) ||
-      !write_all(payload.data(), payload.size())) {
-    return fail("cannot write " + temp_path);
-  }
-  // mkstemp makes the file 0600; the store's other files are readable by all.
-  if (::fchmod(fd, 0644) != 0) return fail("cannot set the mode of " + temp_path);
-  if (::fsync(fd) != 0) return fail("cannot sync " + temp_path);
-  if (::close(fd) != 0) {
-    const Status status = io_error_from_errno("cannot close " + temp_path);
-    ::unlink(temp_path.c_str());
-    return status;
-  }
-  if (::rename(temp_path.c_str(), final_path.c_str()) != 0) {
-    const Status status = io_error_from_errno("cannot rename " + temp_path + " to " + final_path);
-    ::unlink(temp_path.c_str());
-    return status;
-  }
-  return Status::Ok();
+  // Readable by all, as the store's other files (a server may run as another user).
+  AtomicWriteOptions options;
+  options.sync = true;
+  options.mode = 0644;
+  const std::string_view parts[] = {std::string_view(reinterpret_cast<const char*>(&header), sizeof header),
+                                    payload};
+  return write_file_atomically(directory + "/" + kProxyFileName, parts, options);
 }
 
 Expected<ProxyFileHeader> read_proxy_file_header(const std::string& path) {

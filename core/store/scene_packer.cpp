@@ -299,6 +299,7 @@ Status ScenePacker::check_replaceable(const fs::path& output) const {
     const std::string name = it->path().filename().string();
     const bool store_file = name == kManifestFileName || name == kBrickDataFileName ||
                             name == kProxyFileName ||
+                            name.starts_with("." + std::string(kProxyFileName) + ".tmp-") ||
                             name.starts_with(std::string(kProxyFileName) + ".partial-");
     if (!store_file)
       return failed_precondition(refusal + "it holds '" + name + "', which is not part of an Outcore store");

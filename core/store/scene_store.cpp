@@ -13,17 +13,6 @@
 
 namespace outcore {
 
-namespace {
-
-template <class Identity>
-Identity identity_of(const struct stat& info) {
-  return {static_cast<uint64_t>(info.st_dev), static_cast<uint64_t>(info.st_ino),
-          static_cast<uint64_t>(info.st_size),
-          static_cast<int64_t>(info.st_mtim.tv_sec) * 1'000'000'000 + info.st_mtim.tv_nsec};
-}
-
-}  // namespace
-
 Expected<std::shared_ptr<const SceneStore>> SceneStore::open(const std::string& directory) {
   std::error_code ec;
   if (!std::filesystem::is_directory(directory, ec)) {
@@ -41,7 +30,7 @@ Expected<std::shared_ptr<const SceneStore>> SceneStore::open(const std::string& 
   if (::stat(manifest_path.c_str(), &manifest_info) != 0) {
     return io_error_from_errno("cannot stat " + manifest_path);
   }
-  store->manifest_identity_ = identity_of<FileIdentity>(manifest_info);
+  store->manifest_identity_ = identity_of(manifest_info);
   OUTCORE_ASSIGN_OR_RETURN(store->manifest_, read_manifest(manifest_path));
 
   const std::string data_path = directory + "/" + kBrickDataFileName;
@@ -49,7 +38,7 @@ Expected<std::shared_ptr<const SceneStore>> SceneStore::open(const std::string& 
   if (store->brick_fd_ < 0) return io_error_from_errno("cannot open brick data " + data_path);
   struct stat st {};
   if (fstat(store->brick_fd_, &st) != 0) return io_error_from_errno("cannot stat " + data_path);
-  store->brick_file_identity_ = identity_of<FileIdentity>(st);
+  store->brick_file_identity_ = identity_of(st);
   const auto data_bytes = static_cast<uint64_t>(st.st_size);
   const auto& bricks = store->manifest_.bricks;
   for (size_t id = 0; id < bricks.size(); ++id) {
@@ -75,7 +64,7 @@ Status SceneStore::check_unchanged_on_disk() const {
       }
       return io_error_from_errno("cannot stat " + path);
     }
-    if (identity_of<FileIdentity>(info) != *identity) {
+    if (identity_of(info) != *identity) {
       return failed_precondition("the scene store " + directory_ +
                                  " was replaced on disk (by pack --force?) since it was opened: " + path +
                                  " is another file now");

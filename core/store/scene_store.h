@@ -16,6 +16,7 @@
 
 #include "core/store/brick_data.h"
 #include "core/store/manifest.h"
+#include "core/util/mapped_file.h"
 #include "core/util/status.h"
 
 namespace outcore {
@@ -44,20 +45,12 @@ class SceneStore {
   Status check_unchanged_on_disk() const;
 
  private:
-  // Which file a path named when the store was opened.
-  struct FileIdentity {
-    uint64_t device = 0;
-    uint64_t inode = 0;
-    uint64_t size = 0;
-    int64_t modified_ns = 0;
-    bool operator==(const FileIdentity&) const = default;
-  };
-
   SceneStore() = default;
 
   std::string directory_;
   Manifest manifest_;
   int brick_fd_ = -1;
+  // Which files the paths named when the store was opened.
   FileIdentity manifest_identity_;
   FileIdentity brick_file_identity_;
   uint64_t bytes_on_disk_ = 0;

@@ -50,13 +50,13 @@ Expected<int> open_for_reading(const std::string& path, struct stat* info) {
   return fd;
 }
 
+}  // namespace
+
 FileIdentity identity_of(const struct stat& info) {
   return {static_cast<uint64_t>(info.st_dev), static_cast<uint64_t>(info.st_ino),
           static_cast<uint64_t>(info.st_size),
           static_cast<int64_t>(info.st_mtim.tv_sec) * 1000000000 + info.st_mtim.tv_nsec};
 }
-
-}  // namespace
 
 Expected<FileIdentity> file_identity(const std::string& path) {
   struct stat info {};

@@ -22,6 +22,8 @@
 // be their only user (the subtree tier makes sure of it).
 #pragma once
 
+#include <sys/stat.h>
+
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -44,6 +46,8 @@ struct FileIdentity {
 
 // The identity of the file at `path`: NOT_FOUND when there is none.
 Expected<FileIdentity> file_identity(const std::string& path);
+// The identity of a file already stat()ed (or fstat()ed).
+FileIdentity identity_of(const struct stat& info);
 
 class MappedFile {
  public:
