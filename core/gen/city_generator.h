@@ -79,8 +79,8 @@ class CityGenerator final : public Generator {
 
   // The base mesh exactly as `of` streamed it (triangle k = base().triangle(k)).
   const IndexedMesh& base() const { return base_; }
-  // Bytes the base mesh holds for the generator's lifetime.
-  uint64_t base_memory_bytes() const {
+  // The base mesh, held for the generator's lifetime.
+  uint64_t held_memory_bytes() const override {
     return base_.vertices.capacity() * sizeof(Vec3f) +
            base_.triangles.capacity() * sizeof(base_.triangles[0]);
   }

@@ -11,6 +11,8 @@
 #include <system_error>
 #include <type_traits>
 
+#include "core/util/file_type.h"
+
 namespace outcore {
 
 namespace {
@@ -27,12 +29,7 @@ Status open_for_reading(const std::string& path, int& fd) {
   // late with a less helpful message, blocks, or never ends.
   if (S_ISDIR(info.st_mode)) return invalid_argument(path + ": is a directory, not a file");
   if (!S_ISREG(info.st_mode)) {
-    const char* kind = S_ISFIFO(info.st_mode)   ? "a FIFO"
-                       : S_ISCHR(info.st_mode)  ? "a character device"
-                       : S_ISBLK(info.st_mode)  ? "a block device"
-                       : S_ISSOCK(info.st_mode) ? "a socket"
-                                                : "a special file";
-    return invalid_argument(path + ": is " + kind + ", not a regular file");
+    return invalid_argument(path + ": is " + file_type_name(info.st_mode) + ", not a regular file");
   }
   const int flags = ::fcntl(fd, F_GETFL);
   if (flags < 0 || ::fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) != 0) return io_error_from_errno(path);

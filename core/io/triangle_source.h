@@ -53,6 +53,9 @@ class TriangleSource {
   // and reading them back (generators); the packer then re-streams instead of
   // spilling.
   virtual bool cheap_to_restream() const { return false; }
+  // Bytes the source holds for its whole lifetime (a generator's base mesh),
+  // which the packer's memory plan must reserve.
+  virtual uint64_t held_memory_bytes() const { return 0; }
 };
 
 // Sink that forwards batches to a callable: Status(std::span<const Triangle>).

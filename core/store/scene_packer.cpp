@@ -21,7 +21,6 @@
 #include <memory>
 #include <mutex>
 
-#include "core/gen/city_generator.h"
 #include "core/gen/generator.h"
 #include "core/gen/generator_factory.h"
 #include "core/geometry/coordinate_limits.h"
@@ -181,6 +180,8 @@ class ScenePacker {
 
  private:
   Status validate_options() const;
+  // OK when nothing is at `output`, or --force is given and it may be replaced.
+  Status check_output(const fs::path& output) const;
   // --force: whether the existing `output` may be replaced (an Outcore store
   // holding no input of this pack); an error naming what it is otherwise.
   Status check_replaceable(const fs::path& output) const;
@@ -247,16 +248,17 @@ Status ScenePacker::validate_options() const {
                             std::to_string(options_.vertex_memory_mb));
   }
   if (options_.inputs.size() >= 0xffffffffull) return invalid_argument("too many inputs");
+  return check_output(normalized_output(options_.output));
+}
+
+Status ScenePacker::check_output(const fs::path& output) const {
   std::error_code ec;
-  const fs::path output = normalized_output(options_.output);
   // symlink_status: a dangling link at -o is something there too.
-  if (fs::exists(fs::symlink_status(output, ec))) {
-    if (!options_.overwrite) {
-      return already_exists("output " + options_.output + " already exists (use --force to replace it)");
-    }
-    OUTCORE_RETURN_IF_ERROR(check_replaceable(output));
+  if (!fs::exists(fs::symlink_status(output, ec))) return Status::Ok();
+  if (!options_.overwrite) {
+    return already_exists("output " + options_.output + " already exists (use --force to replace it)");
   }
-  return Status::Ok();
+  return check_replaceable(output);
 }
 
 Status ScenePacker::check_replaceable(const fs::path& output) const {
@@ -338,8 +340,7 @@ Status ScenePacker::open_sources(const SourceOptions& source_options) {
     auto source = spec.starts_with("gen:") ? make_generator(spec, generator_options)
                                            : open_triangle_source(spec, source_options);
     if (!source.ok()) return source.status();
-    if (const auto* city = dynamic_cast<const CityGenerator*>(source->get()))
-      memory_.generator_meshes += city->base_memory_bytes();
+    memory_.generator_meshes += (*source)->held_memory_bytes();
     sources_.push_back(std::move(source).value());
   }
   return Status::Ok();
@@ -1172,12 +1173,9 @@ Expected<PackSummary> ScenePacker::run() {
   // Swap into place. An existing store is moved aside first and removed only
   // after the new one is in place.
   std::string displaced;
+  // Checked again: what is there may have changed while the pack ran.
+  OUTCORE_RETURN_IF_ERROR(check_output(output_path));
   if (fs::exists(fs::symlink_status(output_path, ec))) {
-    // Checked again: what is there may have changed while the pack ran.
-    if (!options_.overwrite) {
-      return already_exists("output " + options_.output + " already exists (use --force to replace it)");
-    }
-    OUTCORE_RETURN_IF_ERROR(check_replaceable(output_path));
     // A leftover of an interrupted run of a process with the same pid must not
     // block the swap.
     const std::string base = output_path.string() + ".replaced-" + std::to_string(::getpid());

@@ -9,35 +9,21 @@
 #include <filesystem>
 #include <system_error>
 
+#include "core/util/buffered_file.h"
+
 namespace outcore {
 namespace {
 
 namespace fs = std::filesystem;
-
-bool write_all(int fd, std::string_view bytes) {
-  const char* data = bytes.data();
-  std::size_t size = bytes.size();
-  while (size > 0) {
-    const ssize_t n = ::write(fd, data, size);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return false;
-    }
-    data += n;
-    size -= static_cast<std::size_t>(n);
-  }
-  return true;
-}
 
 // Writes to an existing non-regular file (a device, a FIFO) in place.
 Status write_in_place(const std::string& path, std::span<const std::string_view> parts) {
   const int fd = ::open(path.c_str(), O_WRONLY | O_CLOEXEC);
   if (fd < 0) return io_error_from_errno("cannot open " + path);
   for (const std::string_view part : parts) {
-    if (!write_all(fd, part)) {
-      const Status status = io_error_from_errno("cannot write " + path);
+    if (Status written = write_fully(fd, part.data(), part.size(), path); !written.ok()) {
       ::close(fd);
-      return status;
+      return written;
     }
   }
   if (::close(fd) != 0) return io_error_from_errno("cannot write " + path);
@@ -82,7 +68,11 @@ Status write_file_atomically(const std::string& path, std::span<const std::strin
     return failed;
   };
   for (const std::string_view part : parts) {
-    if (!write_all(fd, part)) return fail("cannot write " + path);
+    if (Status written = write_fully(fd, part.data(), part.size(), path); !written.ok()) {
+      ::close(fd);
+      ::unlink(temp.c_str());
+      return written;
+    }
   }
   // The umask may have cleared bits an explicit mode asks for.
   if (options.mode >= 0 && ::fchmod(fd, static_cast<mode_t>(options.mode)) != 0) {

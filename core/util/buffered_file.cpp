@@ -8,7 +8,6 @@
 
 namespace outcore {
 
-namespace {
 Status write_fully(int fd, const char* data, std::size_t bytes, const std::string& path) {
   while (bytes > 0) {
     const ssize_t put = ::write(fd, data, bytes);
@@ -21,7 +20,6 @@ Status write_fully(int fd, const char* data, std::size_t bytes, const std::strin
   }
   return Status::Ok();
 }
-}  // namespace
 
 BufferedFileWriter::~BufferedFileWriter() {
   if (writer_thread_.joinable()) {

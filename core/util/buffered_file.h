@@ -1,7 +1,7 @@
 // BufferedFileWriter / read_file_chunks: sequential file I/O with a fixed-size
 // buffer, for spill files and brick data where the whole file never fits in
 // memory. Writes go through write(2) (not mmap) so the page cache, not this
-// process, holds what was written.
+// process, holds what was written. write_fully: one whole write(2) loop.
 //
 // Thread-safety: a writer is used by one thread at a time (an asynchronous
 // writer owns one background thread of its own).
@@ -19,6 +19,10 @@
 #include "core/util/status.h"
 
 namespace outcore {
+
+// Writes all `bytes` at `data` to `fd` (retrying short writes and EINTR);
+// IO_ERROR "cannot write PATH: reason" otherwise.
+Status write_fully(int fd, const char* data, std::size_t bytes, const std::string& path);
 
 class BufferedFileWriter {
  public:

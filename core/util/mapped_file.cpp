@@ -89,10 +89,6 @@ MappedFile& MappedFile::operator=(MappedFile&& other) noexcept {
   return *this;
 }
 
-void MappedFile::will_need() const {
-  if (data_ != nullptr) (void)madvise(const_cast<char*>(data_), size_, MADV_WILLNEED);  // a hint
-}
-
 void MappedFile::release_pages() const {
   // A read-only file mapping has no dirty pages: dropping them loses nothing.
   // A copy loses its bytes, which its owner reads again (read_again) first.
@@ -100,18 +96,8 @@ void MappedFile::release_pages() const {
 }
 
 Expected<MappedFile> MappedFile::open(const std::string& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) {
-    const int error = errno;
-    if (error == ENOENT || error == ENOTDIR) return not_found("no file " + path);
-    return io_error("cannot open " + path + ": " + std::strerror(error));
-  }
   struct stat info {};
-  if (fstat(fd, &info) != 0) {
-    const int error = errno;
-    ::close(fd);
-    return io_error("cannot stat " + path + ": " + std::strerror(error));
-  }
+  OUTCORE_ASSIGN_OR_RETURN(const int fd, open_for_reading(path, &info));
   MappedFile file;
   file.size_ = static_cast<std::size_t>(info.st_size);
   file.identity_ = identity_of(info);

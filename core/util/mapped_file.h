@@ -73,8 +73,6 @@ class MappedFile {
   Status read_again(const std::string& path);
 
   std::span<const char> bytes() const { return {data_, size_}; }
-  // A hint (MADV_WILLNEED) that all of the file is about to be read.
-  void will_need() const;
   // Unmaps the pages read so far (MADV_DONTNEED) but keeps the mapping: they
   // leave this process's RSS. A file mapping faults them in again, with the
   // same bytes (the page cache keeps them), when next read; a copy's pages
@@ -84,7 +82,6 @@ class MappedFile {
   void release_pages() const;
   // The file's identity when it was opened or last read.
   const FileIdentity& identity() const { return identity_; }
-  bool is_copy() const { return copy_; }
 
  private:
   const char* data_ = nullptr;

@@ -17,6 +17,8 @@
 #include <random>
 #include <utility>
 
+#include "core/util/file_type.h"
+
 namespace outcore {
 namespace {
 
@@ -142,16 +144,6 @@ Status SharedMemoryObject::check_name(std::string_view name) {
 }
 
 namespace {
-
-const char* file_type_name(mode_t mode) {
-  if (S_ISFIFO(mode)) return "a FIFO";
-  if (S_ISDIR(mode)) return "a directory";
-  if (S_ISCHR(mode)) return "a character device";
-  if (S_ISBLK(mode)) return "a block device";
-  if (S_ISSOCK(mode)) return "a socket";
-  if (S_ISLNK(mode)) return "a symbolic link";
-  return "not a regular file";
-}
 
 // shm_open(name) and fstat; the descriptor and what fstat said, or the
 // errors open() reports. Anyone who can write /dev/shm can put a FIFO, a
