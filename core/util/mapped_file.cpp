@@ -10,6 +10,8 @@
 #include <string>
 #include <utility>
 
+#include "core/util/file_type.h"
+
 namespace outcore {
 namespace {
 
@@ -30,9 +32,12 @@ Status read_whole(int fd, char* data, std::size_t size, const std::string& path)
   return Status::Ok();
 }
 
-// Opens `path` for reading and stats it: NOT_FOUND or IO_ERROR.
+// Opens `path` for reading and stats it: NOT_FOUND or IO_ERROR, also for
+// anything but a regular file. O_NONBLOCK: a FIFO put under the name (a
+// subtree tier directory other users may write) would otherwise hold the
+// caller in open() until a writer came; reads of a regular file ignore it.
 Expected<int> open_for_reading(const std::string& path, struct stat* info) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
   if (fd < 0) {
     const int error = errno;
     if (error == ENOENT || error == ENOTDIR) return not_found("no file " + path);
@@ -45,7 +50,7 @@ Expected<int> open_for_reading(const std::string& path, struct stat* info) {
   }
   if (!S_ISREG(info->st_mode)) {
     ::close(fd);
-    return io_error(path + " is not a regular file");
+    return io_error(path + " is " + file_type_name(info->st_mode) + ", not a regular file");
   }
   return fd;
 }
