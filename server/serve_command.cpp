@@ -75,6 +75,70 @@ void log_summary(const server::SceneQueryService& service, const QueryEngine& en
   }
 }
 
+// Serves until SIGINT or SIGTERM (returned): once a second checks whether the
+// store was replaced on disk, and logs a summary at most every
+// kSummaryInterval when requests came in.
+int serve_until_stop_signal(const sigset_t& stop_signals, server::SceneQueryService& service,
+                            const QueryEngine& engine) {
+  int signal_number = 0;
+  auto last_summary = std::chrono::steady_clock::now();
+  uint64_t requests_at_summary = 0;
+  while (signal_number <= 0) {
+    const timespec tick{1, 0};
+    signal_number = sigtimedwait(&stop_signals, nullptr, &tick);
+    if (signal_number <= 0) service.check_store();
+    const auto now = std::chrono::steady_clock::now();
+    if (signal_number <= 0 && now - last_summary >= kSummaryInterval) {
+      const uint64_t requests = service.counters().requests;
+      if (requests != requests_at_summary) log_summary(service, engine);
+      requests_at_summary = requests;
+      last_summary = now;
+    }
+  }
+  return signal_number;
+}
+
+// Stops `grpc_server` after SIGINT/SIGTERM: in-flight calls get `drain_s` seconds
+// to finish, then their batches are cancelled, and past kCancelGrace the
+// process exits with status 1 without them.
+void drain_and_stop(grpc::Server& grpc_server, double drain_s, const server::SceneQueryService& service,
+                    const QueryEngine& engine) {
+  const auto drain =
+      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::duration<double>(drain_s));
+  grpc_server.GetHealthCheckService()->Shutdown();  // NOT_SERVING from now on
+  // gRPC cancels the calls still running at the deadline, but waits for their
+  // handlers to return, and a handler inside the engine returns only when its
+  // batch ends. So this thread watches the bound: past it, the engine's
+  // batches are cancelled, and past the grace the process exits regardless.
+  const auto drain_end = std::chrono::steady_clock::now() + drain;
+  std::mutex stop_mutex;
+  std::condition_variable stop_done;
+  bool stopped = false;
+  std::thread stopper([&] {
+    grpc_server.Shutdown(std::chrono::system_clock::now() + drain);
+    grpc_server.Wait();
+    std::lock_guard lock(stop_mutex);
+    stopped = true;
+    stop_done.notify_all();
+  });
+  {
+    std::unique_lock lock(stop_mutex);
+    if (!stop_done.wait_until(lock, drain_end, [&] { return stopped; })) {
+      spdlog::warn("drain bound of {} s passed with calls in flight: cancelling their batches", drain_s);
+      request_cancel();
+      if (!stop_done.wait_until(lock, drain_end + kCancelGrace, [&] { return stopped; })) {
+        log_summary(service, engine);
+        spdlog::error("calls still running {} s after the drain bound; exiting without them",
+                      kCancelGrace.count());
+        spdlog::default_logger()->flush();
+        std::fflush(nullptr);
+        std::_Exit(1);
+      }
+    }
+  }
+  stopper.join();
+}
+
 int run_serve(const ServeArgs& args) {
   // Signals are taken synchronously by this thread (sigtimedwait below), so
   // every thread started from here on (gRPC, TBB) inherits them blocked.
@@ -109,8 +173,6 @@ int run_serve(const ServeArgs& args) {
     return report_command_error(
         "serve", "--drain-s must be more than 0 and at most 3600, got " + std::to_string(args.drain_s));
   }
-  const auto drain =
-      std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::duration<double>(args.drain_s));
   // Unix sockets have no port; gRPC checks their paths.
   const bool unix_socket = args.listen.starts_with("unix:") || args.listen.starts_with("unix-abstract:");
   if (!unix_socket) {
@@ -192,54 +254,9 @@ int run_serve(const ServeArgs& args) {
   spdlog::info("serving {} ({} triangles, {} bricks, cache budget {} MiB) on {}", args.scene,
                manifest.triangle_count, (*engine)->store().brick_count(), args.cache_mb, address);
 
-  int signal_number = 0;
-  auto last_summary = std::chrono::steady_clock::now();
-  uint64_t requests_at_summary = 0;
-  while (signal_number <= 0) {
-    const timespec tick{1, 0};
-    signal_number = sigtimedwait(&stop_signals, nullptr, &tick);
-    if (signal_number <= 0) service.check_store();
-    const auto now = std::chrono::steady_clock::now();
-    if (signal_number <= 0 && now - last_summary >= kSummaryInterval) {
-      const uint64_t requests = service.counters().requests;
-      if (requests != requests_at_summary) log_summary(service, **engine);
-      requests_at_summary = requests;
-      last_summary = now;
-    }
-  }
+  const int signal_number = serve_until_stop_signal(stop_signals, service, **engine);
   spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, args.drain_s);
-  server->GetHealthCheckService()->Shutdown();  // NOT_SERVING from now on
-  // gRPC cancels the calls still running at the deadline, but waits for their
-  // handlers to return, and a handler inside the engine returns only when its
-  // batch ends. So this thread watches the bound: past it, the engine's
-  // batches are cancelled, and past the grace the process exits regardless.
-  const auto drain_end = std::chrono::steady_clock::now() + drain;
-  std::mutex stop_mutex;
-  std::condition_variable stop_done;
-  bool stopped = false;
-  std::thread stopper([&] {
-    server->Shutdown(std::chrono::system_clock::now() + drain);
-    server->Wait();
-    std::lock_guard lock(stop_mutex);
-    stopped = true;
-    stop_done.notify_all();
-  });
-  {
-    std::unique_lock lock(stop_mutex);
-    if (!stop_done.wait_until(lock, drain_end, [&] { return stopped; })) {
-      spdlog::warn("drain bound of {} s passed with calls in flight: cancelling their batches", args.drain_s);
-      request_cancel();
-      if (!stop_done.wait_until(lock, drain_end + kCancelGrace, [&] { return stopped; })) {
-        log_summary(service, **engine);
-        spdlog::error("calls still running {} s after the drain bound; exiting without them",
-                      kCancelGrace.count());
-        spdlog::default_logger()->flush();
-        std::fflush(nullptr);
-        std::_Exit(1);
-      }
-    }
-  }
-  stopper.join();
+  drain_and_stop(*server, args.drain_s, service, **engine);
   log_summary(service, **engine);
   spdlog::info("stopped");
   return 0;
