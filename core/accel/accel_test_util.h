@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "core/io/source_factory.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/store/brick_data.h"
 
 namespace outcore::accel_test {

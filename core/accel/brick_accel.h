@@ -10,8 +10,8 @@
 #include <cstdint>
 #include <span>
 
-#include "core/query/query_types.h"
-#include "core/query/ray_types.h"
+#include "core/ray/query_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore {
 

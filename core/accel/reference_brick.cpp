@@ -4,7 +4,7 @@
 #include <utility>
 
 #include "core/accel/bvh/double_triangle_test.h"
-#include "core/query/query_types.h"
+#include "core/ray/query_types.h"
 
 namespace outcore {
 

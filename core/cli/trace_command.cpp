@@ -13,7 +13,7 @@
 #include "core/cli/subtree_options.h"
 #include "core/io/npy.h"
 #include "core/query/query_engine.h"
-#include "core/query/spawn_origin.h"
+#include "core/ray/spawn_origin.h"
 #include "core/util/atomic_file.h"
 
 namespace outcore {

@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/util/status.h"
 
 namespace outcore {
@@ -38,7 +38,7 @@ Status write_rays_npy(const std::string& path, std::span<const Ray> rays);
 Status write_hits_npy(const std::string& path, std::span<const Hit> hits);
 Expected<std::vector<Hit>> read_hits_npy(const std::string& path);
 Status write_bools_npy(const std::string& path, std::span<const uint8_t> flags);
-// (N,3) float32: points such as secondary-ray origins (core/query/spawn_origin.h).
+// (N,3) float32: points such as secondary-ray origins (core/ray/spawn_origin.h).
 Status write_points_npy(const std::string& path, std::span<const Vec3f> points);
 Expected<std::vector<uint8_t>> read_bools_npy(const std::string& path);
 

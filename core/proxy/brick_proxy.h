@@ -51,7 +51,7 @@
 
 #include "core/geometry/hit_rounding.h"
 #include "core/geometry/vec3.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore {
 

@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "core/query/brute_force_reference.h"
+#include "core/accel/brute_force_reference.h"
 
 namespace outcore {
 namespace {

@@ -10,7 +10,7 @@
 #include <random>
 #include <thread>
 
-#include "core/query/brute_force_reference.h"
+#include "core/accel/brute_force_reference.h"
 #include "core/store/scene_packer.h"
 #include "core/util/cancellation.h"
 #include "tests/support/packed_scene.h"

@@ -28,7 +28,7 @@
 #include <emmintrin.h>
 #endif
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/upper/upper_hierarchy.h"
 
 namespace outcore {

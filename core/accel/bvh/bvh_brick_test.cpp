@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "core/accel/accel_test_util.h"
+#include "core/accel/brute_force_reference.h"
 #include "core/accel/bvh/bvh_traversal.h"
-#include "core/query/brute_force_reference.h"
 
 namespace outcore {
 namespace {

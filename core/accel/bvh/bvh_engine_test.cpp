@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/query/brute_force_reference.h"
+#include "core/accel/brute_force_reference.h"
 #include "core/query/query_engine.h"
 #include "core/store/scene_packer.h"
 #include "tests/support/packed_scene.h"

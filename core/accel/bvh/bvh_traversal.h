@@ -27,8 +27,8 @@
 
 #include "core/accel/bvh/bvh_tree.h"
 #include "core/accel/bvh/triangle_hit.h"
-#include "core/query/query_types.h"
-#include "core/query/ray_types.h"
+#include "core/ray/query_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore {
 namespace bvh_detail {

@@ -19,7 +19,7 @@
 #include "core/accel/bvh/triangle_hit.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
 #include "core/geometry/triangle.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore {
 

@@ -11,7 +11,7 @@
 
 #include "core/accel/bvh/triangle_hit.h"
 #include "core/geometry/triangle.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore {
 

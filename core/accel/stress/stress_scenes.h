@@ -40,7 +40,7 @@
 #include <string>
 #include <vector>
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
 #include "core/util/temporary_directory.h"

@@ -9,7 +9,7 @@
 
 #include <cstdint>
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore {
 

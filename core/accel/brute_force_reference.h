@@ -16,7 +16,7 @@
 #include <span>
 
 #include "core/geometry/triangle.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/store/brick_data.h"
 
 namespace outcore {

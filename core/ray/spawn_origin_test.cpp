@@ -1,4 +1,4 @@
-#include "core/query/spawn_origin.h"
+#include "core/ray/spawn_origin.h"
 
 #include <gtest/gtest.h>
 

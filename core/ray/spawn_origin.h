@@ -29,7 +29,7 @@
 #include <cmath>
 #include <limits>
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore {
 

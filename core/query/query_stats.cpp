@@ -1,0 +1,93 @@
+#include "core/query/query_stats.h"
+
+#include <cstdio>
+
+#include "core/util/json_writer.h"
+
+namespace outcore {
+
+std::string QueryStats::to_json() const {
+  JsonWriter j;
+  j.begin_object();
+  j.field("rays", rays).field("invalid_rays", invalid_rays).field("rays_hit", rays_hit);
+  j.field("upper_nodes_visited", upper_nodes_visited).field("brick_visits", brick_visits);
+  j.field("rays_in_brick_set", rays_in_brick_set);
+  j.field("proxy_tests", proxy_tests).field("bricks_skipped_by_proxy", bricks_skipped_by_proxy);
+  j.field("proxy_bytes", proxy_bytes);
+  j.field("rays_traced_ahead", rays_traced_ahead);
+  j.field("brick_acquisitions", brick_acquisitions)
+      .field("cache_hits", cache_hits)
+      .field("cache_misses", cache_misses);
+  j.field("brick_builds", brick_builds).field("evictions", evictions);
+  j.field("subtree_loads", subtree_loads).field("subtree_loads_checked", subtree_loads_checked);
+  j.field("subtree_loads_kept", subtree_loads_kept);
+  j.field("subtree_writes", subtree_writes);
+  j.field("subtree_rejects", subtree_rejects).field("subtree_bytes_read", subtree_bytes_read);
+  j.field("subtree_bytes_written", subtree_bytes_written);
+  j.field("peak_bytes_resident", peak_bytes_resident).field("cache_budget_bytes", cache_budget_bytes);
+  j.key("seconds").begin_object();
+  j.field("total", seconds_total).field("upper", seconds_upper).field("build", seconds_build);
+  j.field("brick", seconds_brick).field("proxy", seconds_proxy);
+  j.field("brick_builds_summed", seconds_brick_builds).field("subtree_loads_summed", seconds_subtree_loads);
+  j.end_object();
+  j.field("rays_per_second", seconds_total > 0 ? rays / seconds_total : 0.0);
+  j.end_object();
+  return j.str();
+}
+
+std::string QueryStats::to_text() const {
+  char buf[1024];
+  std::snprintf(
+      buf, sizeof buf,
+      "rays %llu (%llu hit, %llu invalid) in %.3f s = %.2f M rays/s\n"
+      "  upper: %llu nodes visited, %.3f s first pass\n"
+      "  bricks: %llu ray visits (%llu traced ahead), %llu acquisitions (%llu hits, %llu misses), %llu "
+      "builds, %llu evictions\n"
+      "  cache: peak %.1f MiB of %.1f MiB budget\n"
+      "  time: build/wait %.3f s, brick traversal %.3f s\n",
+      static_cast<unsigned long long>(rays), static_cast<unsigned long long>(rays_hit),
+      static_cast<unsigned long long>(invalid_rays), seconds_total,
+      seconds_total > 0 ? rays / seconds_total / 1e6 : 0.0,
+      static_cast<unsigned long long>(upper_nodes_visited), seconds_upper,
+      static_cast<unsigned long long>(brick_visits), static_cast<unsigned long long>(rays_traced_ahead),
+      static_cast<unsigned long long>(brick_acquisitions), static_cast<unsigned long long>(cache_hits),
+      static_cast<unsigned long long>(cache_misses), static_cast<unsigned long long>(brick_builds),
+      static_cast<unsigned long long>(evictions), peak_bytes_resident / 1048576.0,
+      cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
+  std::string text = buf;
+  if (rays_in_brick_set > 0) {
+    std::snprintf(buf, sizeof buf,
+                  "  one Embree scene over all bricks: %llu rays (brick visits not counted)\n",
+                  static_cast<unsigned long long>(rays_in_brick_set));
+    text += buf;
+  }
+  if (proxy_bytes > 0) {
+    const uint64_t candidates = brick_visits + bricks_skipped_by_proxy;
+    std::snprintf(buf, sizeof buf,
+                  "  proxies: %llu of %llu brick visits skipped (%.1f %%), %llu tests, %.3f s (all threads), "
+                  "%.2f MiB resident\n",
+                  static_cast<unsigned long long>(bricks_skipped_by_proxy),
+                  static_cast<unsigned long long>(candidates),
+                  candidates > 0 ? 100.0 * bricks_skipped_by_proxy / candidates : 0.0,
+                  static_cast<unsigned long long>(proxy_tests), seconds_proxy, proxy_bytes / 1048576.0);
+    text += buf;
+  } else {
+    text += "  proxies: off\n";
+  }
+  if (subtree_loads + subtree_writes + subtree_rejects > 0) {
+    std::snprintf(
+        buf, sizeof buf,
+        "  subtree tier: %llu loads (%llu checked in full, %llu on kept mappings; %.1f MiB, %.3f s), %llu "
+        "writes (%.1f MiB), %llu rejected; builds %.3f s\n",
+        static_cast<unsigned long long>(subtree_loads),
+        static_cast<unsigned long long>(subtree_loads_checked),
+        static_cast<unsigned long long>(subtree_loads_kept), subtree_bytes_read / 1048576.0,
+        seconds_subtree_loads, static_cast<unsigned long long>(subtree_writes),
+        subtree_bytes_written / 1048576.0, static_cast<unsigned long long>(subtree_rejects),
+        seconds_brick_builds);
+    text += buf;
+  }
+  return text;
+}
+
+}  // namespace outcore
