@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/util/status.h"
 #include "outcore/v1/scene_query.pb.h"
 

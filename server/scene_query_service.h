@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "core/query/query_engine.h"
-#include "core/query/query_types.h"
+#include "core/ray/query_types.h"
 #include "outcore/v1/scene_query.grpc.pb.h"
 #include "server/ray_batch.h"
 #include "server/shared_mapping_cache.h"

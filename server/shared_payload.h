@@ -18,7 +18,7 @@
 #include <string_view>
 #include <vector>
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/util/shared_memory.h"
 #include "core/util/status.h"
 #include "outcore/v1/scene_query.pb.h"

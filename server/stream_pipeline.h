@@ -53,7 +53,7 @@
 #include <thread>
 #include <vector>
 
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "outcore/v1/scene_query.pb.h"
 #include "server/ray_batch.h"
 

@@ -16,7 +16,7 @@
 
 #include "core/cache/access_trace.h"
 #include "core/io/npy.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/test_paths.h"
 

@@ -11,7 +11,7 @@
 #include <vector>
 
 #include "core/io/npy.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/test_paths.h"
 #include "tests/support/test_rays.h"

@@ -12,8 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "core/accel/brute_force_reference.h"
 #include "core/io/npy.h"
-#include "core/query/brute_force_reference.h"
 #include "core/store/scene_store.h"
 #include "tests/support/subprocess.h"
 #include "tests/support/test_paths.h"

@@ -36,7 +36,7 @@
 #include <vector>
 
 #include "core/query/query_engine.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 #include "core/util/shared_memory.h"
 #include "core/util/status.h"
 #include "outcore/v1/scene_query.grpc.pb.h"

@@ -1,5 +1,5 @@
 """outcore.spawn_origins: bitwise equal to `outcore trace --spawn-out` (the
-C++ helper, core/query/spawn_origin.h) on the same rays, for both sides, and
+C++ helper, core/ray/spawn_origin.h) on the same rays, for both sides, and
 secondary rays from its origins never re-hit their own triangle."""
 
 import subprocess

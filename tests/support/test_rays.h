@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "core/geometry/aabb.h"
-#include "core/query/ray_types.h"
+#include "core/ray/ray_types.h"
 
 namespace outcore::testing {
 

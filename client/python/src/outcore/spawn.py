@@ -2,7 +2,7 @@
 bounce or transmission ray from each hit so that it neither re-hits its own
 triangle nor skips a truly close neighbour.
 
-The same formula as the engine's C++ helper (core/query/spawn_origin.h; in the
+The same formula as the engine's C++ helper (core/ray/spawn_origin.h; in the
 spirit of Wächter & Binder 2019): the hit point o + t d in float64, moved
 along the geometric normal by 2^-16 * (|o|_inf + |p|_inf + t |d|_inf) + 2^-120,
 rounded once to float32. Results are bitwise those of `outcore trace
