@@ -69,7 +69,7 @@ inline constexpr float kSlabWiden = 0x1p-18f;
 
 // std::fmin / std::fmax semantics (a NaN operand yields the other one) as
 // selects the compiler inlines: without -ffast-math GCC calls libm's fminf /
-// fmaxf through the PLT, which cost about 10% of a whole trace.
+// fmaxf through the PLT: a call per box test in the hottest loop.
 inline float fmin_inline(float a, float b) {
   return b != b ? a : (a < b ? a : b);
 }
@@ -314,8 +314,7 @@ uint32_t next_bricks_flat(const FlatLeaves& flat, const SlabRay& ray, float tmin
 // next_bricks_wide (W = 4, SSE) and next_bricks_wide8 (W = 8, AVX;
 // upper_wide8_traversal.h): a fraction of the binary tree's nodes, each
 // testing its W boxes in one SIMD operation and without a branch per box.
-// Built from the binary tree once, when the engine opens (about 10 us for
-// 732 bricks).
+// Built from the binary tree once, when the engine opens.
 template <uint32_t W>
 struct WideUpperOf {
   struct Node {
