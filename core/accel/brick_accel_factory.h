@@ -8,11 +8,13 @@
 
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "core/accel/brick_accel.h"
 #include "core/accel/brick_serializer.h"
+#include "core/accel/resident_brick_set.h"
 #include "core/geometry/hit_rounding.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
@@ -37,6 +39,16 @@ class BrickBuilder {
   // proxies' rounding bound (core/proxy/brick_proxy.h). Moeller-Trumbore's
   // unless the structure's test is watertight.
   virtual double hit_rounding_scale() const { return kMollerTrumboreHitRounding; }
+  // Whether make_resident_set() can give a set over this builder's bricks
+  // (asked before the engine pins every brick for one).
+  virtual bool offers_resident_set() const { return false; }
+  // One structure over `bricks` (each built by this builder and pinned while
+  // the set lives; core/accel/resident_brick_set.h), or nullptr when the
+  // structure has no such fast path.
+  virtual Expected<std::unique_ptr<ResidentBrickSet>> make_resident_set(
+      std::span<const BrickAccel* const> /*bricks*/) const {
+    return std::unique_ptr<ResidentBrickSet>();
+  }
 };
 
 using BrickAccelOptions = std::map<std::string, std::string>;

@@ -10,6 +10,7 @@
 #include <string>
 #include <utility>
 
+#include "core/accel/brick_build_input.h"
 #include "core/accel/embree_device.h"
 
 namespace outcore {
@@ -148,15 +149,8 @@ Expected<std::unique_ptr<EmbreeBrickAccel>> EmbreeBrickAccel::build(BrickData&& 
                                                                     const EmbreeBrickConfig& config) {
   const auto start = std::chrono::steady_clock::now();
   const uint64_t n = brick.triangles.size();
-  const std::string what = "building brick " + std::to_string(brick.brick_id) + " (embree)";
-  if (brick.ids.size() != n) {
-    return invalid_argument(what + ": " + std::to_string(n) + " triangles but " +
-                            std::to_string(brick.ids.size()) + " ids");
-  }
-  if (n > kMaxTriangles) {
-    return out_of_range(what + ": " + std::to_string(n) + " triangles, at most " +
-                        std::to_string(kMaxTriangles));
-  }
+  const std::string what = brick_build_context(brick, "embree");
+  OUTCORE_RETURN_IF_ERROR(check_brick_build_input(brick, what, kMaxTriangles));
   OUTCORE_ASSIGN_OR_RETURN(EmbreeDevice * device, EmbreeDevice::instance());
 
   std::unique_ptr<EmbreeBrickAccel> accel(new EmbreeBrickAccel());

@@ -209,6 +209,11 @@ class EmbreeBrickBuilder final : public BrickBuilder {
     return EmbreeBrickAccel::reserve_bytes(triangle_count, config_);
   }
   const std::string& name() const override;
+  // The resident bricks in one Embree scene (EmbreeBrickSet; defined in
+  // embree_brick_set.cpp).
+  bool offers_resident_set() const override { return true; }
+  Expected<std::unique_ptr<ResidentBrickSet>> make_resident_set(
+      std::span<const BrickAccel* const> bricks) const override;
   const EmbreeBrickConfig& config() const { return config_; }
 
  private:

@@ -98,4 +98,13 @@ void EmbreeBrickSet::occluded(std::span<const uint32_t> ray_ids, const Ray* rays
   EmbreeBrickAccel::occluded_in(target(), ray_ids, rays, occluded);
 }
 
+Expected<std::unique_ptr<ResidentBrickSet>> EmbreeBrickBuilder::make_resident_set(
+    std::span<const BrickAccel* const> bricks) const {
+  // Every brick of this builder is an EmbreeBrickAccel.
+  std::vector<const EmbreeBrickAccel*> accels(bricks.size());
+  for (std::size_t b = 0; b < bricks.size(); ++b) accels[b] = static_cast<const EmbreeBrickAccel*>(bricks[b]);
+  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<EmbreeBrickSet> set, EmbreeBrickSet::build(accels));
+  return std::unique_ptr<ResidentBrickSet>(std::move(set));
+}
+
 }  // namespace outcore

@@ -35,22 +35,23 @@
 #include <vector>
 
 #include "core/accel/embree_brick.h"
+#include "core/accel/resident_brick_set.h"
 #include "core/util/status.h"
 
 namespace outcore {
 
-class EmbreeBrickSet {
+class EmbreeBrickSet final : public ResidentBrickSet {
  public:
   // Over `bricks` (each non-null, in any order; a brick without triangles
   // adds nothing). Embree's errors as Status.
   static Expected<std::unique_ptr<EmbreeBrickSet>> build(std::span<const EmbreeBrickAccel* const> bricks);
-  ~EmbreeBrickSet();
+  ~EmbreeBrickSet() override;
   EmbreeBrickSet(const EmbreeBrickSet&) = delete;
   EmbreeBrickSet& operator=(const EmbreeBrickSet&) = delete;
 
   // As BrickAccel::intersect / occluded, over every brick of the set.
-  void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const;
-  void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const;
+  void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
+  void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
 
   // The bricks it was built over, in the order given.
   const std::vector<const EmbreeBrickAccel*>& bricks() const { return bricks_; }

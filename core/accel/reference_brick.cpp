@@ -1,8 +1,11 @@
 #include "core/accel/reference_brick.h"
 
 #include <chrono>
+#include <cstdint>
+#include <string>
 #include <utility>
 
+#include "core/accel/brick_build_input.h"
 #include "core/accel/bvh/double_triangle_test.h"
 #include "core/ray/query_types.h"
 
@@ -11,15 +14,10 @@ namespace outcore {
 Expected<std::unique_ptr<ReferenceBrickAccel>> ReferenceBrickAccel::build(BrickData&& brick) {
   const auto start = std::chrono::steady_clock::now();
   const uint64_t n = brick.triangles.size();
-  if (brick.ids.size() != n) {
-    return invalid_argument("building brick " + std::to_string(brick.brick_id) +
-                            " (reference): " + std::to_string(n) + " triangles but " +
-                            std::to_string(brick.ids.size()) + " ids");
-  }
-  if (n > 0xfffffffeu) {
-    return out_of_range("building brick " + std::to_string(brick.brick_id) +
-                        " (reference): too many triangles");
-  }
+  const std::string what = brick_build_context(brick, "reference");
+  // Its own wording for too many triangles (below), so no limit here.
+  OUTCORE_RETURN_IF_ERROR(check_brick_build_input(brick, what, UINT64_MAX));
+  if (n > 0xfffffffeu) return out_of_range(what + ": too many triangles");
   std::unique_ptr<ReferenceBrickAccel> accel(new ReferenceBrickAccel());
   accel->triangle_count_ = static_cast<uint32_t>(n);
   // Compacted in place: the brick's own vectors are kept.

@@ -53,8 +53,12 @@
 #include "core/ray/ray_problem.h"
 #include "core/ray/ray_types.h"
 #include "core/store/scene_store.h"
+#include "core/util/reuse_pool.h"
 
 namespace outcore {
+
+struct BatchScratch;  // batch_scratch.h
+struct UpperWalks;    // upper_walks.h
 
 struct EngineOptions {
   // Hard budget for built bricks, in bytes.
@@ -87,11 +91,11 @@ struct QueryOptions {
   bool strict = false;
   // Under a budget that cannot hold the scene, a brick being built is also
   // traced by the rays that will reach it later, so that it need not be
-  // built again for them (query_engine.cpp). Answers are the same either way.
+  // built again for them (trace_ahead.h). Answers are the same either way.
   bool trace_ahead = true;
   // When every brick is resident and the budget holds the scene, threads
   // take chunks of consecutive rays through all their bricks instead of
-  // queueing the batch at bricks (query_engine.cpp). Answers are the same
+  // queueing the batch at bricks (strategy_in_cache_sweep.cpp). Answers are the same
   // either way; false forces the queues (for comparison).
   bool in_cache_sweep = true;
   // On CPUs with AVX, the upper hierarchy is walked 8 boxes at a time for
@@ -101,15 +105,14 @@ struct QueryOptions {
   // comparison). Answers are the same either way; only the count of upper
   // boxes tested differs.
   bool avx_upper = true;
-  // When every brick is resident, the budget holds the scene, the bricks
-  // are Embree's and there are at most 16 of them, a batch of at least
-  // brick_set_min_rays rays goes through one Embree scene that instances
-  // every brick (core/accel/embree_brick_set.h): one Embree call per ray
-  // instead of the upper walk and a call per brick visit, and coherent
-  // streams across bricks. Answers are the same either way; false walks the
-  // upper hierarchy (for comparison, and for the per-brick statistics, which
-  // the set cannot give). Smaller batches take the sweep: the set is built
-  // per batch (tens of microseconds).
+  // When every brick is resident, the budget holds the scene, the brick
+  // structure offers a resident set (core/accel/resident_brick_set.h) and
+  // there are at most 16 bricks, a batch of at least brick_set_min_rays rays
+  // goes through one structure over every brick: one call per chunk of rays
+  // instead of the upper walk and a call per brick visit. Answers are the
+  // same either way; false walks the upper hierarchy (for comparison, and
+  // for the per-brick statistics, which the set cannot give). Smaller
+  // batches take the sweep: the set is made per batch.
   bool brick_set = true;
   std::size_t brick_set_min_rays = 16384;
 };
@@ -142,23 +145,14 @@ class QueryEngine {
   ~QueryEngine();
 
  private:
-  // Per-batch working memory (per-ray progress, queues), kept for the next
-  // batch so that warm batches neither allocate nor page-fault it
-  // (query_engine.cpp).
-  struct Scratch;
-  // The upper hierarchy in the forms the traversals walk (flat, 4-wide,
-  // 8-wide), made once when the engine opens (query_engine.cpp).
-  struct UpperWalks;
-
   QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
               std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report, bool cache_fits_scene,
               uint64_t bricks_budget_holds);
 
+  // Plans the batch (batch_planner.h) and runs its strategy (strategy.h).
   template <QueryKind kKind>
   Status run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
              QueryStats* stats);
-  std::unique_ptr<Scratch> take_scratch();
-  void give_back_scratch(std::unique_ptr<Scratch> scratch);
 
   std::shared_ptr<const SceneStore> store_;
   std::unique_ptr<BrickCache> cache_;
@@ -166,11 +160,12 @@ class QueryEngine {
   ProxyOpenReport proxy_report_;
   bool cache_fits_scene_;
   uint64_t bricks_budget_holds_;  // the budget over the average brick reservation
-  bool embree_bricks_ = false;    // the bricks are EmbreeBrickAccels
   BrickAccelOptions accel_options_;
+  // The upper hierarchy in the forms the walks use, made once on open.
   std::unique_ptr<const UpperWalks> upper_walks_;
-  std::mutex scratch_mutex_;  // taken twice per batch, never per ray
-  std::vector<std::unique_ptr<Scratch>> free_scratch_;
+  // Per-batch working memory kept for the next batch, so that warm batches
+  // neither allocate nor page-fault it.
+  ReusePool<BatchScratch> scratch_pool_;
 };
 
 }  // namespace outcore

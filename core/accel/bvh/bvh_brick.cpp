@@ -4,6 +4,7 @@
 #include <chrono>
 #include <utility>
 
+#include "core/accel/brick_build_input.h"
 #include "core/accel/bvh/bvh_brick_serializer.h"
 #include "core/accel/bvh/bvh_traversal.h"
 #include "core/accel/bvh/double_triangle_test.h"
@@ -78,15 +79,8 @@ Expected<std::unique_ptr<BvhBrickAccel>> BvhBrickAccel::build(BrickData&& brick,
                                                               const BvhBrickConfig& config) {
   const auto start = std::chrono::steady_clock::now();
   const uint64_t n = brick.triangles.size();
-  const std::string what = "building brick " + std::to_string(brick.brick_id) + " (bvh)";
-  if (brick.ids.size() != n) {
-    return invalid_argument(what + ": " + std::to_string(n) + " triangles but " +
-                            std::to_string(brick.ids.size()) + " ids");
-  }
-  if (n > kMaxTriangles) {
-    return out_of_range(what + ": " + std::to_string(n) + " triangles, at most " +
-                        std::to_string(kMaxTriangles));
-  }
+  const std::string what = brick_build_context(brick, "bvh");
+  OUTCORE_RETURN_IF_ERROR(check_brick_build_input(brick, what, kMaxTriangles));
   const Status valid = config.builder.validate();
   if (!valid.ok()) return invalid_argument(what + ": " + valid.message());
 

@@ -1,0 +1,88 @@
+// QueryBatch: one batch's rays and answers (closest hits or occlusion flags,
+// by kKind) and its rays' validity flags, with the per-ray operations every
+// strategy shares: reset, check, horizon, finish, trace at a brick.
+//
+// Thread-safety: a view; tasks touch disjoint rays.
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "core/accel/brick_accel.h"
+#include "core/ray/query_types.h"
+#include "core/ray/ray_problem.h"
+#include "core/ray/ray_types.h"
+#include "core/util/status.h"
+
+namespace outcore {
+
+template <QueryKind kKind>
+struct QueryBatch {
+  std::span<const Ray> rays;
+  Hit* hits = nullptr;          // closest hit
+  uint8_t* occluded = nullptr;  // any hit
+  // 1 per valid ray, written by validate_batch() (validated apart) or the
+  // queued strategy's first pass; unused by the chunked strategies otherwise.
+  uint8_t* valid = nullptr;
+  // The rays were validated before any strategy ran (strict mode, or
+  // reordering off): `valid` says, nothing is to be reset or counted again.
+  bool validated_apart = false;
+
+  std::size_t size() const { return rays.size(); }
+
+  // Ray i's answer before tracing (a miss).
+  void reset_answer(std::size_t i) const {
+    if constexpr (kKind == QueryKind::kClosestHit) {
+      hits[i] = Hit{};
+    } else {
+      occluded[i] = 0;
+    }
+  }
+  // 1 when ray i's answer is a hit.
+  uint64_t answered_hit(std::size_t i) const {
+    if constexpr (kKind == QueryKind::kClosestHit) return hits[i].is_hit();
+    return occluded[i] != 0;
+  }
+  // Resets ray i's answer; true when the ray is valid (ray_problem).
+  bool reset_and_check(std::size_t i) const {
+    reset_answer(i);
+    return ray_problem(rays[i]) == nullptr;
+  }
+  // In the chunked strategies: whether ray i is to be traced. Validated
+  // apart, its flag says; otherwise it is reset and checked here, and counted
+  // in `invalid` when it is bad.
+  bool chunk_ray_valid(std::size_t i, uint64_t& invalid) const {
+    if (validated_apart) return valid[i] != 0;
+    if (reset_and_check(i)) return true;
+    ++invalid;
+    return false;
+  }
+  // The largest distance at which a brick can still matter for ray i.
+  float horizon(std::size_t i) const {
+    if constexpr (kKind == QueryKind::kClosestHit) return std::min(rays[i].tfar, hits[i].t);
+    return rays[i].tfar;
+  }
+  // Nothing further can change ray i's answer (an occlusion found).
+  bool finished(std::size_t i) const {
+    if constexpr (kKind == QueryKind::kAnyHit) return occluded[i] != 0;
+    return false;
+  }
+  // Traces the rays `ids` at one brick (one virtual call for them all).
+  void trace(const BrickAccel& accel, std::span<const uint32_t> ids) const {
+    if constexpr (kKind == QueryKind::kClosestHit) {
+      accel.intersect(ids, rays.data(), hits);
+    } else {
+      accel.occluded(ids, rays.data(), occluded);
+    }
+  }
+};
+
+// Resets every answer and sets the validity flags, in parallel chunks, adding
+// the bad rays to `invalid`. With `strict`, INVALID_ARGUMENT naming the first
+// bad ray of the batch.
+template <QueryKind kKind>
+Status validate_batch(const QueryBatch<kKind>& batch, bool strict, uint64_t& invalid);
+
+}  // namespace outcore
