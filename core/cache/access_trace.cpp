@@ -128,145 +128,196 @@ uint64_t AccessTraceWriter::records_written() const {
 }
 
 namespace {
+
 // Brick ids allowed in a hint of a trace without a "bricks" line.
 constexpr uint32_t kMaxUnlabelledBrickId = uint32_t{1} << 26;
+
+bool parse_outcome(std::string_view name, AccessOutcome& outcome) {
+  for (const AccessOutcome candidate :
+       {AccessOutcome::kHit, AccessOutcome::kMiss, AccessOutcome::kWait, AccessOutcome::kLoad}) {
+    if (name == access_outcome_name(candidate)) {
+      outcome = candidate;
+      return true;
+    }
+  }
+  return false;
+}
+
+// read_access_trace's state: the trace so far, the hint waiting for its
+// record, and the running byte total. Errors name the file and line.
+class TraceReader {
+ public:
+  explicit TraceReader(const std::string& path) : path_(path) {}
+
+  Expected<AccessTrace> read();
+
+ private:
+  std::string where() const { return path_ + ":" + std::to_string(reader_.line_number()) + ": "; }
+  Status read_line(std::string_view line);
+  Status read_comment(std::string_view body);
+  Status read_version(std::string_view body);
+  Status read_hint(std::string_view value);
+  Status read_record(std::string_view line);
+  // The six comma-separated fields of a record line.
+  Status split_fields(std::string_view line, std::string_view (&fields)[6]) const;
+  // Each term is checked before the sum, so neither it nor the sum wraps.
+  Status add_bytes(const char* name, uint64_t value);
+
+  const std::string& path_;
+  TextLineReader reader_;
+  AccessTrace trace_;
+  bool saw_version_ = false, saw_columns_ = false;
+  bool has_pending_hint_ = false;
+  std::vector<uint32_t> pending_hint_;
+  uint64_t total_bytes_ = 0;  // of every record's bytes and reserved_bytes, <= kMaxTraceBytes
+};
+
+Expected<AccessTrace> TraceReader::read() {
+  OUTCORE_RETURN_IF_ERROR(reader_.open(path_));
+  std::string_view line;
+  while (reader_.next_line(line)) {
+    line = trim(line);
+    if (!line.empty()) OUTCORE_RETURN_IF_ERROR(read_line(line));
+  }
+  OUTCORE_RETURN_IF_ERROR(reader_.status());
+  if (!saw_version_) return invalid_argument(path_ + ": empty file, not an outcore access trace");
+  if (!saw_columns_) return invalid_argument(path_ + ": no column line '" + std::string(kColumns) + "'");
+  return std::move(trace_);
+}
+
+Status TraceReader::read_line(std::string_view line) {
+  if (line.front() == '#') return read_comment(trim(line.substr(1)));
+  if (!saw_version_)
+    return invalid_argument(where() + "not an outcore access trace (no '# outcore brick access trace' line)");
+  if (!saw_columns_) {
+    if (line != kColumns)
+      return invalid_argument(where() + "expected the column line '" + std::string(kColumns) + "'");
+    saw_columns_ = true;
+    return Status::Ok();
+  }
+  return read_record(line);
+}
+
+Status TraceReader::read_version(std::string_view body) {
+  constexpr std::string_view kPrefix = "outcore brick access trace, version ";
+  if (body.substr(0, kPrefix.size()) != kPrefix)
+    return invalid_argument(where() + "not an outcore access trace (the first line must be '# " +
+                            std::string(kPrefix) + std::to_string(kAccessTraceVersion) + "')");
+  int version = 0;
+  if (!parse_unsigned(body.substr(kPrefix.size()), version) || version < kOldestAccessTraceVersion ||
+      version > kAccessTraceVersion)
+    return failed_precondition(where() + "access trace version '" + std::string(body.substr(kPrefix.size())) +
+                               "' is not supported (this build reads versions " +
+                               std::to_string(kOldestAccessTraceVersion) + " to " +
+                               std::to_string(kAccessTraceVersion) + ")");
+  saw_version_ = true;
+  return Status::Ok();
+}
+
+Status TraceReader::read_comment(std::string_view body) {
+  if (!saw_version_) return read_version(body);
+  const auto colon = body.find(':');
+  if (colon == std::string_view::npos) return Status::Ok();  // a free comment
+  const std::string_view key = trim(body.substr(0, colon));
+  const std::string_view value = trim(body.substr(colon + 1));
+  if (key == "hint") return read_hint(value);
+  AccessTraceInfo& info = trace_.info;
+  if (key == "policy") info.policy = value;
+  if (key == "builder") info.builder = value;
+  if (key == "source") info.source = value;
+  if (key == "budget_bytes" && !parse_unsigned(value, info.budget_bytes))
+    return invalid_argument(where() + "budget_bytes '" + std::string(value) + "' is not a byte count");
+  if (key == "bricks" && !parse_unsigned(value, info.bricks))
+    return invalid_argument(where() + "bricks '" + std::string(value) + "' is not a count");
+  return Status::Ok();
+}
+
+Status TraceReader::read_hint(std::string_view value) {
+  pending_hint_.clear();
+  has_pending_hint_ = true;
+  for (std::string_view rest = value; !rest.empty();) {
+    const auto space = rest.find(' ');
+    const std::string_view item = rest.substr(0, space);
+    uint32_t brick = 0;
+    if (!parse_unsigned(item, brick))
+      return invalid_argument(where() + "bad brick id '" + std::string(item) + "' in a hint");
+    // Policies index arrays by brick id: an absurd id must not allocate.
+    const uint32_t limit = trace_.info.bricks != 0 ? trace_.info.bricks : kMaxUnlabelledBrickId;
+    if (brick >= limit)
+      return invalid_argument(where() + "brick " + std::to_string(brick) +
+                              " in a hint is beyond the trace's " + std::to_string(limit) + " bricks");
+    pending_hint_.push_back(brick);
+    rest = space == std::string_view::npos ? std::string_view{} : trim(rest.substr(space + 1));
+  }
+  return Status::Ok();
+}
+
+Status TraceReader::split_fields(std::string_view line, std::string_view (&fields)[6]) const {
+  std::size_t count = 0;
+  for (std::string_view rest = line;; ++count) {
+    const auto comma = rest.find(',');
+    if (count < 6) fields[count] = rest.substr(0, comma);
+    if (comma == std::string_view::npos) {
+      ++count;
+      break;
+    }
+    rest.remove_prefix(comma + 1);
+  }
+  if (count != 6) return invalid_argument(where() + "expected 6 fields, found " + std::to_string(count));
+  return Status::Ok();
+}
+
+Status TraceReader::add_bytes(const char* name, uint64_t value) {
+  if (value > kMaxTraceBytes - total_bytes_) {
+    return invalid_argument(
+        where() + std::string(name) + " " + std::to_string(value) +
+        (value > kMaxTraceBytes ? " is more than " : " brings the trace's byte counts to more than ") +
+        std::to_string(kMaxTraceBytes) + " (2^62), beyond any real cache");
+  }
+  total_bytes_ += value;
+  return Status::Ok();
+}
+
+Status TraceReader::read_record(std::string_view line) {
+  std::string_view fields[6];
+  OUTCORE_RETURN_IF_ERROR(split_fields(line, fields));
+  AccessRecord r;
+  if (!parse_unsigned(fields[0], r.seq))
+    return invalid_argument(where() + "bad seq '" + std::string(fields[0]) + "'");
+  if (r.seq != trace_.records.size())
+    return invalid_argument(where() + "seq " + std::to_string(r.seq) + " out of order (expected " +
+                            std::to_string(trace_.records.size()) + ")");
+  if (!parse_unsigned(fields[1], r.brick))
+    return invalid_argument(where() + "bad brick id '" + std::string(fields[1]) + "'");
+  if (!parse_unsigned(fields[2], r.bytes))
+    return invalid_argument(where() + "bad bytes '" + std::string(fields[2]) + "'");
+  if (!parse_unsigned(fields[3], r.reserved_bytes))
+    return invalid_argument(where() + "bad reserved_bytes '" + std::string(fields[3]) + "'");
+  OUTCORE_RETURN_IF_ERROR(add_bytes("bytes", r.bytes));
+  OUTCORE_RETURN_IF_ERROR(add_bytes("reserved_bytes", r.reserved_bytes));
+  if (parse_real(fields[4], r.build_seconds) != NumberParse::kOk || !std::isfinite(r.build_seconds) ||
+      r.build_seconds < 0)
+    return invalid_argument(where() + "bad build_seconds '" + std::string(fields[4]) + "'");
+  if (!parse_outcome(fields[5], r.outcome))
+    return invalid_argument(where() + "outcome '" + std::string(fields[5]) +
+                            "' is not hit, miss, wait or load");
+  if (trace_.info.bricks != 0 && r.brick >= trace_.info.bricks)
+    return invalid_argument(where() + "brick " + std::to_string(r.brick) + " is beyond the trace's " +
+                            std::to_string(trace_.info.bricks) + " bricks");
+  if (has_pending_hint_) {
+    r.has_hint = true;
+    r.hint = std::move(pending_hint_);
+    pending_hint_ = {};
+    has_pending_hint_ = false;
+  }
+  trace_.records.push_back(std::move(r));
+  return Status::Ok();
+}
+
 }  // namespace
 
 Expected<AccessTrace> read_access_trace(const std::string& path) {
-  TextLineReader reader;
-  OUTCORE_RETURN_IF_ERROR(reader.open(path));
-  AccessTrace trace;
-  std::string_view line;
-  bool saw_version = false, saw_columns = false;
-  bool has_pending_hint = false;
-  std::vector<uint32_t> pending_hint;
-  uint64_t total_bytes = 0;  // of every record's bytes and reserved_bytes, <= kMaxTraceBytes
-  const auto where = [&] { return path + ":" + std::to_string(reader.line_number()) + ": "; };
-  while (reader.next_line(line)) {
-    line = trim(line);
-    if (line.empty()) continue;
-    if (line.front() == '#') {
-      std::string_view body = trim(line.substr(1));
-      if (!saw_version) {
-        constexpr std::string_view kPrefix = "outcore brick access trace, version ";
-        if (body.substr(0, kPrefix.size()) != kPrefix)
-          return invalid_argument(where() + "not an outcore access trace (the first line must be '# " +
-                                  std::string(kPrefix) + std::to_string(kAccessTraceVersion) + "')");
-        int version = 0;
-        if (!parse_unsigned(body.substr(kPrefix.size()), version) || version < kOldestAccessTraceVersion ||
-            version > kAccessTraceVersion)
-          return failed_precondition(
-              where() + "access trace version '" + std::string(body.substr(kPrefix.size())) +
-              "' is not supported (this build reads versions " + std::to_string(kOldestAccessTraceVersion) +
-              " to " + std::to_string(kAccessTraceVersion) + ")");
-        saw_version = true;
-        continue;
-      }
-      const auto colon = body.find(':');
-      if (colon == std::string_view::npos) continue;  // a free comment
-      const std::string_view key = trim(body.substr(0, colon));
-      const std::string_view value = trim(body.substr(colon + 1));
-      if (key == "hint") {
-        pending_hint.clear();
-        has_pending_hint = true;
-        for (std::string_view rest = value; !rest.empty();) {
-          const auto space = rest.find(' ');
-          const std::string_view item = rest.substr(0, space);
-          uint32_t brick = 0;
-          if (!parse_unsigned(item, brick))
-            return invalid_argument(where() + "bad brick id '" + std::string(item) + "' in a hint");
-          // Policies index arrays by brick id: an absurd id must not allocate.
-          const uint32_t limit = trace.info.bricks != 0 ? trace.info.bricks : kMaxUnlabelledBrickId;
-          if (brick >= limit)
-            return invalid_argument(where() + "brick " + std::to_string(brick) +
-                                    " in a hint is beyond the trace's " + std::to_string(limit) + " bricks");
-          pending_hint.push_back(brick);
-          rest = space == std::string_view::npos ? std::string_view{} : trim(rest.substr(space + 1));
-        }
-        continue;
-      }
-      if (key == "policy") trace.info.policy = value;
-      if (key == "builder") trace.info.builder = value;
-      if (key == "source") trace.info.source = value;
-      if (key == "budget_bytes" && !parse_unsigned(value, trace.info.budget_bytes))
-        return invalid_argument(where() + "budget_bytes '" + std::string(value) + "' is not a byte count");
-      if (key == "bricks" && !parse_unsigned(value, trace.info.bricks))
-        return invalid_argument(where() + "bricks '" + std::string(value) + "' is not a count");
-      continue;
-    }
-    if (!saw_version)
-      return invalid_argument(where() +
-                              "not an outcore access trace (no '# outcore brick access trace' line)");
-    if (!saw_columns) {
-      if (line != kColumns)
-        return invalid_argument(where() + "expected the column line '" + std::string(kColumns) + "'");
-      saw_columns = true;
-      continue;
-    }
-    std::string_view fields[6];
-    std::size_t count = 0;
-    for (std::string_view rest = line;; ++count) {
-      const auto comma = rest.find(',');
-      if (count < 6) fields[count] = rest.substr(0, comma);
-      if (comma == std::string_view::npos) {
-        ++count;
-        break;
-      }
-      rest.remove_prefix(comma + 1);
-    }
-    if (count != 6) return invalid_argument(where() + "expected 6 fields, found " + std::to_string(count));
-    AccessRecord r;
-    if (!parse_unsigned(fields[0], r.seq))
-      return invalid_argument(where() + "bad seq '" + std::string(fields[0]) + "'");
-    if (r.seq != trace.records.size())
-      return invalid_argument(where() + "seq " + std::to_string(r.seq) + " out of order (expected " +
-                              std::to_string(trace.records.size()) + ")");
-    if (!parse_unsigned(fields[1], r.brick))
-      return invalid_argument(where() + "bad brick id '" + std::string(fields[1]) + "'");
-    if (!parse_unsigned(fields[2], r.bytes))
-      return invalid_argument(where() + "bad bytes '" + std::string(fields[2]) + "'");
-    if (!parse_unsigned(fields[3], r.reserved_bytes))
-      return invalid_argument(where() + "bad reserved_bytes '" + std::string(fields[3]) + "'");
-    // Each term is checked before the sum, so neither it nor the sum wraps.
-    for (const auto& [name, value] :
-         {std::pair{"bytes", r.bytes}, std::pair{"reserved_bytes", r.reserved_bytes}}) {
-      if (value > kMaxTraceBytes - total_bytes) {
-        return invalid_argument(
-            where() + std::string(name) + " " + std::to_string(value) +
-            (value > kMaxTraceBytes ? " is more than " : " brings the trace's byte counts to more than ") +
-            std::to_string(kMaxTraceBytes) + " (2^62), beyond any real cache");
-      }
-      total_bytes += value;
-    }
-    if (parse_real(fields[4], r.build_seconds) != NumberParse::kOk || !std::isfinite(r.build_seconds) ||
-        r.build_seconds < 0)
-      return invalid_argument(where() + "bad build_seconds '" + std::string(fields[4]) + "'");
-    if (fields[5] == "hit")
-      r.outcome = AccessOutcome::kHit;
-    else if (fields[5] == "miss")
-      r.outcome = AccessOutcome::kMiss;
-    else if (fields[5] == "wait")
-      r.outcome = AccessOutcome::kWait;
-    else if (fields[5] == "load")
-      r.outcome = AccessOutcome::kLoad;
-    else
-      return invalid_argument(where() + "outcome '" + std::string(fields[5]) +
-                              "' is not hit, miss, wait or load");
-    if (trace.info.bricks != 0 && r.brick >= trace.info.bricks)
-      return invalid_argument(where() + "brick " + std::to_string(r.brick) + " is beyond the trace's " +
-                              std::to_string(trace.info.bricks) + " bricks");
-    if (has_pending_hint) {
-      r.has_hint = true;
-      r.hint = std::move(pending_hint);
-      pending_hint = {};
-      has_pending_hint = false;
-    }
-    trace.records.push_back(std::move(r));
-  }
-  OUTCORE_RETURN_IF_ERROR(reader.status());
-  if (!saw_version) return invalid_argument(path + ": empty file, not an outcore access trace");
-  if (!saw_columns) return invalid_argument(path + ": no column line '" + std::string(kColumns) + "'");
-  return trace;
+  return TraceReader(path).read();
 }
 
 }  // namespace outcore

@@ -1,7 +1,6 @@
 #include "core/cache/subtree_tier.h"
 
 #include <spdlog/spdlog.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -12,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/util/atomic_file.h"
 #include "core/util/checksum.h"
 
 namespace outcore {
@@ -177,22 +177,19 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
 
 std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const BrickAccel& accel) {
   const std::string name = file_name(key);
-  std::string temp;
   {
     std::lock_guard lock(mutex_);
     if (files_.count(name) != 0) return nullptr;
-    // Unique among processes (pid) and threads (sequence); hidden from the
-    // index (no "brick-" prefix).
-    temp = (fs::path(options_.directory) /
-            ("." + name + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(++temp_sequence_)))
-               .string();
   }
+  // A hidden temporary (no "brick-" prefix, so never indexed), renamed over
+  // the brick's file once complete.
+  AtomicFile file;
+  file.prepare(path_of(key));
   const auto start = Clock::now();
   uint64_t bytes = 0;
-  const Status written = write_subtree_file(temp, key, serializer_, accel, &bytes);
-  std::error_code error;
+  const Status written = write_subtree_file(file.temp_path(), key, serializer_, accel, &bytes);
   if (!written.ok()) {
-    fs::remove(temp, error);
+    file.discard();
     std::lock_guard lock(mutex_);
     ++counters_.write_failures;
     if (!std::exchange(logged_write_failure_, true)) {
@@ -202,23 +199,21 @@ std::unique_ptr<BrickAccel> SubtreeTier::store(const SubtreeKey& key, const Bric
     return nullptr;
   }
   // Ours, under a name no one else uses: what we wrote, so known good.
-  const Expected<FileIdentity> identity = file_identity(temp);
+  const Expected<FileIdentity> identity = file_identity(file.temp_path());
   const std::optional<FileIdentity> ours =
       identity.ok() ? std::optional<FileIdentity>(*identity) : std::nullopt;
   std::unique_lock lock(mutex_);
   if (options_.max_bytes > 0 && bytes > options_.max_bytes) {
-    fs::remove(temp, error);
+    file.discard();
     ++counters_.writes_too_large;
     return nullptr;
   }
   evict_locked(bytes);
-  fs::rename(temp, path_of(key), error);
-  if (error) {
-    fs::remove(temp, error);
+  if (const Status moved = file.commit(); !moved.ok()) {
     ++counters_.write_failures;
     if (!std::exchange(logged_write_failure_, true)) {
       spdlog::warn("subtree tier: cannot rename the file of brick {} into place: {}", key.brick_id,
-                   error.message());
+                   moved.message());
     }
     return nullptr;
   }

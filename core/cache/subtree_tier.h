@@ -14,10 +14,10 @@
 //   budget plus a fixed overhead). Each brick is written once per directory (a brick
 //   the tier knows is on disk is not written again).
 // - Atomic: a file is written under a temporary name in the directory and
-//   renamed into place, so readers (of this or another process) see a whole
-//   file or none. Not fsync'ed: after a crash a file may be torn, which its
-//   checksum catches. A writer that crashes mid-file leaves its hidden
-//   temporary (".brick-*.tmp-PID-N"), which is never read; delete it by hand.
+//   renamed into place (AtomicFile, core/util/atomic_file.h), so readers (of
+//   this or another process) see a whole file or none. Not fsync'ed: after a crash a file may be torn, which
+//   its checksum catches. A writer that crashes mid-file leaves its hidden temporary (".brick-*.tmp-PID-N"),
+//   which is never read; delete it by hand.
 // - Keyed by brick id, the source brick's checksum and the structure key, all
 //   in the file name and checked again in the header: several stores and
 //   configurations may share one directory.
@@ -172,7 +172,6 @@ class SubtreeTier {
   std::map<std::string, FileEntry> files_;  // by file name
   uint64_t use_clock_ = 0;
   uint64_t kept_mappings_ = 0;
-  uint64_t temp_sequence_ = 0;
   bool logged_write_failure_ = false;
   SubtreeTierCounters counters_;
 };

@@ -83,153 +83,180 @@ double mib(uint64_t bytes) {
   return static_cast<double>(bytes) / 1048576.0;
 }
 
-int run_cache_sim(const CacheSimArgs& args) {
-  constexpr const char* kCommand = "cache-sim";
-  if (!args.budget_mb.empty() && !args.budget_fractions.empty())
-    return report_command_error(kCommand, "give either --budget-mb or --budget-fractions, not both");
-  auto policies = parse_policies(args.policy);
-  if (!policies.ok()) return report_command_error(kCommand, policies.status().message());
-  auto trace = read_access_trace(args.trace_path);
-  if (!trace.ok()) return report_command_error(kCommand, trace.status().message());
-  if (trace->records.empty()) return report_command_error(kCommand, args.trace_path + " has no records");
-  const TraceProfile profile = TraceProfile::of(*trace);
-
+Expected<std::vector<uint64_t>> budgets_from_mb(const std::string& text) {
+  OUTCORE_ASSIGN_OR_RETURN(const std::vector<double> values, parse_list("--budget-mb", text));
+  constexpr double kMaxMiB = static_cast<double>(kMaxTraceBytes >> 20);
   std::vector<uint64_t> budgets;
-  if (!args.budget_mb.empty()) {
-    auto values = parse_list("--budget-mb", args.budget_mb);
-    if (!values.ok()) return report_command_error(kCommand, values.status().message());
-    constexpr double kMaxMiB = static_cast<double>(kMaxTraceBytes >> 20);
-    for (double v : *values) {
-      // Checked before the conversion: llround of a value past 2^63 is undefined.
-      if (v > kMaxMiB) {
-        return report_command_error(kCommand, "--budget-mb " + format_number(v) + " is more than " +
-                                                  format_number(kMaxMiB) + " MiB (2^62 bytes)");
-      }
-      const auto budget = static_cast<uint64_t>(std::llround(v * 1048576.0));
-      if (budget == 0) {
-        return report_command_error(kCommand, "--budget-mb " + format_number(v) + " is less than one byte");
-      }
-      budgets.push_back(budget);
+  for (double v : values) {
+    // Checked before the conversion: llround of a value past 2^63 is undefined.
+    if (v > kMaxMiB) {
+      return invalid_argument("--budget-mb " + format_number(v) + " is more than " + format_number(kMaxMiB) +
+                              " MiB (2^62 bytes)");
     }
-  } else {
-    const bool defaulted = args.budget_fractions.empty();
-    auto values = parse_list("--budget-fractions", defaulted ? kDefaultFractions : args.budget_fractions);
-    if (!values.ok()) return report_command_error(kCommand, values.status().message());
-    for (double v : *values) {
-      const double bytes = v * static_cast<double>(profile.working_set_bytes);
-      if (bytes > static_cast<double>(kMaxTraceBytes)) {
-        return report_command_error(
-            kCommand, "--budget-fractions " + format_number(v) + " of the working set (" +
-                          std::to_string(profile.working_set_bytes) + " bytes) is more than 2^62 bytes");
-      }
-      const auto budget = static_cast<uint64_t>(std::llround(bytes));
-      // Default fractions below what the largest brick needs are skipped, not errors.
-      if (defaulted && budget < profile.largest_reservation) {
-        std::fprintf(stderr,
-                     "outcore cache-sim: skipping budget fraction %g (%.2f MiB): brick %u needs %.2f MiB\n",
-                     v, mib(budget), profile.largest_brick_id, mib(profile.largest_reservation));
-        continue;
-      }
-      budgets.push_back(budget);
-    }
-    if (budgets.empty()) budgets.push_back(profile.largest_reservation);
+    const auto budget = static_cast<uint64_t>(std::llround(v * 1048576.0));
+    if (budget == 0) return invalid_argument("--budget-mb " + format_number(v) + " is less than one byte");
+    budgets.push_back(budget);
   }
+  return budgets;
+}
+
+Expected<std::vector<uint64_t>> budgets_from_fractions(const std::string& text, const TraceProfile& profile) {
+  const bool defaulted = text.empty();
+  OUTCORE_ASSIGN_OR_RETURN(const std::vector<double> values,
+                           parse_list("--budget-fractions", defaulted ? kDefaultFractions : text));
+  std::vector<uint64_t> budgets;
+  for (double v : values) {
+    const double bytes = v * static_cast<double>(profile.working_set_bytes);
+    if (bytes > static_cast<double>(kMaxTraceBytes)) {
+      return invalid_argument("--budget-fractions " + format_number(v) + " of the working set (" +
+                              std::to_string(profile.working_set_bytes) + " bytes) is more than 2^62 bytes");
+    }
+    const auto budget = static_cast<uint64_t>(std::llround(bytes));
+    // Default fractions below what the largest brick needs are skipped, not errors.
+    if (defaulted && budget < profile.largest_reservation) {
+      std::fprintf(stderr,
+                   "outcore cache-sim: skipping budget fraction %g (%.2f MiB): brick %u needs %.2f MiB\n", v,
+                   mib(budget), profile.largest_brick_id, mib(profile.largest_reservation));
+      continue;
+    }
+    budgets.push_back(budget);
+  }
+  if (budgets.empty()) budgets.push_back(profile.largest_reservation);
+  return budgets;
+}
+
+// The budgets to replay, each checked against the trace.
+Expected<std::vector<uint64_t>> choose_budgets(const CacheSimArgs& args, const AccessTrace& trace,
+                                               const TraceProfile& profile) {
+  OUTCORE_ASSIGN_OR_RETURN(std::vector<uint64_t> budgets,
+                           !args.budget_mb.empty() ? budgets_from_mb(args.budget_mb)
+                                                   : budgets_from_fractions(args.budget_fractions, profile));
   // Every path above yields a budget or an error; an empty table with exit
   // status 0 would read as a successful replay.
-  if (budgets.empty())
-    return report_command_error(kCommand, "no cache budget to replay " + args.trace_path + " with");
-  for (const uint64_t budget : budgets) {
-    const Status fits = check_budget(*trace, profile, budget);
-    if (!fits.ok()) return report_command_error(kCommand, fits.message());
-  }
+  if (budgets.empty()) return invalid_argument("no cache budget to replay " + args.trace_path + " with");
+  for (const uint64_t budget : budgets) OUTCORE_RETURN_IF_ERROR(check_budget(trace, profile, budget));
+  return budgets;
+}
 
-  // One job per (budget, policy); the last column of each budget is OPT.
-  const std::size_t columns = policies->size() + 1;
-  std::vector<Expected<SimulationResult>> results(budgets.size() * columns,
-                                                  Status(StatusCode::kInternal, "not run"));
-  tbb::parallel_for(std::size_t{0}, results.size(), [&](std::size_t job) {
-    const uint64_t budget = budgets[job / columns];
-    const std::size_t column = job % columns;
-    results[job] = column < policies->size() ? simulate_policy(*trace, profile, (*policies)[column], budget)
-                                             : simulate_opt(*trace, profile, budget);
+// Results of every (budget, policy) replay; the last column of each budget
+// is OPT.
+struct SimTable {
+  std::vector<uint64_t> budgets;
+  std::vector<std::string> policies;
+  std::size_t columns = 0;
+  std::vector<Expected<SimulationResult>> results;
+
+  const SimulationResult& at(std::size_t b, std::size_t c) const { return *results[b * columns + c]; }
+  const SimulationResult& opt(std::size_t b) const { return at(b, columns - 1); }
+  double misses_vs_opt(std::size_t b, std::size_t c) const {
+    const uint64_t opt_misses = opt(b).misses;
+    return opt_misses ? static_cast<double>(at(b, c).misses) / static_cast<double>(opt_misses) : 1.0;
+  }
+};
+
+Status run_simulations(const AccessTrace& trace, const TraceProfile& profile, SimTable& table) {
+  table.columns = table.policies.size() + 1;
+  table.results.assign(table.budgets.size() * table.columns, Status(StatusCode::kInternal, "not run"));
+  tbb::parallel_for(std::size_t{0}, table.results.size(), [&](std::size_t job) {
+    const uint64_t budget = table.budgets[job / table.columns];
+    const std::size_t column = job % table.columns;
+    table.results[job] = column < table.policies.size()
+                             ? simulate_policy(trace, profile, table.policies[column], budget)
+                             : simulate_opt(trace, profile, budget);
   });
-  for (const auto& r : results) {
-    if (!r.ok()) return report_command_error(kCommand, r.status().message());
-  }
-  const auto result = [&](std::size_t b, std::size_t c) -> const SimulationResult& {
-    return *results[b * columns + c];
-  };
+  for (const auto& r : table.results) OUTCORE_RETURN_IF_ERROR(r.status());
+  return Status::Ok();
+}
 
+void print_json(const CacheSimArgs& args, const AccessTrace& trace, const TraceProfile& profile,
+                const SimTable& table) {
+  JsonWriter j;
+  j.begin_object();
+  j.field("trace", args.trace_path).field("requests", uint64_t{trace.records.size()});
+  j.field("distinct_bricks", profile.distinct_bricks).field("working_set_bytes", profile.working_set_bytes);
+  j.field("recorded_policy", trace.info.policy).field("recorded_budget_bytes", trace.info.budget_bytes);
+  j.key("results").begin_array();
+  for (std::size_t b = 0; b < table.budgets.size(); ++b) {
+    for (std::size_t c = 0; c < table.columns; ++c) {
+      const SimulationResult& r = table.at(b, c);
+      j.begin_object();
+      j.field("policy", r.policy);
+      if (!r.detail.empty()) j.field("rule", r.detail);
+      j.field("budget_bytes", r.budget_bytes).field("requests", r.requests).field("hits", r.hits);
+      j.field("misses", r.misses).field("miss_ratio", r.miss_ratio()).field("evictions", r.evictions);
+      j.field("bytes_built", r.bytes_built).field("build_seconds", r.build_seconds);
+      j.field("misses_vs_opt", table.misses_vs_opt(b, c));
+      j.end_object();
+    }
+  }
+  j.end_array().end_object();
+  std::printf("%s\n", j.str().c_str());
+}
+
+void print_text(const CacheSimArgs& args, const AccessTrace& trace, const TraceProfile& profile,
+                const SimTable& table) {
+  std::printf("trace %s: %zu requests, %u distinct bricks, working set %.2f MiB", args.trace_path.c_str(),
+              trace.records.size(), profile.distinct_bricks, mib(profile.working_set_bytes));
+  if (!trace.info.policy.empty())
+    std::printf(" (recorded with %s at %.2f MiB)", trace.info.policy.c_str(), mib(trace.info.budget_bytes));
+  std::printf("\n%11s  %-7s %10s %10s %12s %12s %8s\n", "budget_MiB", "policy", "misses", "miss_ratio",
+              "built_MiB", "build_s", "vs_opt");
+  for (std::size_t b = 0; b < table.budgets.size(); ++b) {
+    for (std::size_t c = 0; c < table.columns; ++c) {
+      const SimulationResult& r = table.at(b, c);
+      std::printf("%11.2f  %-7s %10llu %10.4f %12.2f %12.4f %8.3f\n", mib(r.budget_bytes), r.policy.c_str(),
+                  static_cast<unsigned long long>(r.misses), r.miss_ratio(), mib(r.bytes_built),
+                  r.build_seconds, table.misses_vs_opt(b, c));
+    }
+  }
+  std::printf(
+      "opt: Belady (furthest next use; exact for equal brick sizes, best of it and a size-aware\n"
+      "rule otherwise). vs_opt: misses / OPT's misses.\n");
+}
+
+Status write_plot(const std::string& png_path, const AccessTrace& trace, const TraceProfile& profile,
+                  const SimTable& table) {
+  std::vector<PlotSeries> series(table.columns);
+  for (std::size_t c = 0; c < table.columns; ++c) {
+    series[c].name = c + 1 < table.columns ? table.policies[c] : "opt (Belady)";
+    series[c].dashed = c + 1 == table.columns;
+    for (std::size_t b = 0; b < table.budgets.size(); ++b) {
+      series[c].x.push_back(mib(table.budgets[b]));
+      series[c].y.push_back(table.at(b, c).miss_ratio());
+    }
+  }
+  LinePlotConfig plot;
+  plot.title = "Brick cache miss ratio by budget: " + std::to_string(trace.records.size()) + " requests, " +
+               std::to_string(profile.distinct_bricks) + " bricks";
+  plot.x_label = "cache budget (MiB, log scale)";
+  plot.y_label = "miss ratio (builds / requests)";
+  plot.log_x = table.budgets.size() > 1;
+  OUTCORE_ASSIGN_OR_RETURN(const auto image, render_line_plot(series, plot));
+  return write_png(png_path, image.width, image.height, image.pixels);
+}
+
+Status cache_sim(const CacheSimArgs& args) {
+  if (!args.budget_mb.empty() && !args.budget_fractions.empty())
+    return invalid_argument("give either --budget-mb or --budget-fractions, not both");
+  SimTable table;
+  OUTCORE_ASSIGN_OR_RETURN(table.policies, parse_policies(args.policy));
+  OUTCORE_ASSIGN_OR_RETURN(const AccessTrace trace, read_access_trace(args.trace_path));
+  if (trace.records.empty()) return invalid_argument(args.trace_path + " has no records");
+  const TraceProfile profile = TraceProfile::of(trace);
+  OUTCORE_ASSIGN_OR_RETURN(table.budgets, choose_budgets(args, trace, profile));
+  OUTCORE_RETURN_IF_ERROR(run_simulations(trace, profile, table));
   if (args.json) {
-    JsonWriter j;
-    j.begin_object();
-    j.field("trace", args.trace_path).field("requests", uint64_t{trace->records.size()});
-    j.field("distinct_bricks", profile.distinct_bricks).field("working_set_bytes", profile.working_set_bytes);
-    j.field("recorded_policy", trace->info.policy).field("recorded_budget_bytes", trace->info.budget_bytes);
-    j.key("results").begin_array();
-    for (std::size_t b = 0; b < budgets.size(); ++b) {
-      for (std::size_t c = 0; c < columns; ++c) {
-        const SimulationResult& r = result(b, c);
-        const SimulationResult& opt = result(b, columns - 1);
-        j.begin_object();
-        j.field("policy", r.policy);
-        if (!r.detail.empty()) j.field("rule", r.detail);
-        j.field("budget_bytes", r.budget_bytes).field("requests", r.requests).field("hits", r.hits);
-        j.field("misses", r.misses).field("miss_ratio", r.miss_ratio()).field("evictions", r.evictions);
-        j.field("bytes_built", r.bytes_built).field("build_seconds", r.build_seconds);
-        j.field("misses_vs_opt",
-                opt.misses ? static_cast<double>(r.misses) / static_cast<double>(opt.misses) : 1.0);
-        j.end_object();
-      }
-    }
-    j.end_array().end_object();
-    std::printf("%s\n", j.str().c_str());
+    print_json(args, trace, profile, table);
   } else {
-    std::printf("trace %s: %zu requests, %u distinct bricks, working set %.2f MiB", args.trace_path.c_str(),
-                trace->records.size(), profile.distinct_bricks, mib(profile.working_set_bytes));
-    if (!trace->info.policy.empty())
-      std::printf(" (recorded with %s at %.2f MiB)", trace->info.policy.c_str(),
-                  mib(trace->info.budget_bytes));
-    std::printf("\n%11s  %-7s %10s %10s %12s %12s %8s\n", "budget_MiB", "policy", "misses", "miss_ratio",
-                "built_MiB", "build_s", "vs_opt");
-    for (std::size_t b = 0; b < budgets.size(); ++b) {
-      const SimulationResult& opt = result(b, columns - 1);
-      for (std::size_t c = 0; c < columns; ++c) {
-        const SimulationResult& r = result(b, c);
-        const double ratio =
-            opt.misses ? static_cast<double>(r.misses) / static_cast<double>(opt.misses) : 1.0;
-        std::printf("%11.2f  %-7s %10llu %10.4f %12.2f %12.4f %8.3f\n", mib(r.budget_bytes), r.policy.c_str(),
-                    static_cast<unsigned long long>(r.misses), r.miss_ratio(), mib(r.bytes_built),
-                    r.build_seconds, ratio);
-      }
-    }
-    std::printf(
-        "opt: Belady (furthest next use; exact for equal brick sizes, best of it and a size-aware\n"
-        "rule otherwise). vs_opt: misses / OPT's misses.\n");
+    print_text(args, trace, profile, table);
   }
+  if (!args.png_path.empty()) OUTCORE_RETURN_IF_ERROR(write_plot(args.png_path, trace, profile, table));
+  return Status::Ok();
+}
 
-  if (!args.png_path.empty()) {
-    std::vector<PlotSeries> series(columns);
-    for (std::size_t c = 0; c < columns; ++c) {
-      series[c].name = c + 1 < columns ? (*policies)[c] : "opt (Belady)";
-      series[c].dashed = c + 1 == columns;
-      for (std::size_t b = 0; b < budgets.size(); ++b) {
-        series[c].x.push_back(mib(budgets[b]));
-        series[c].y.push_back(result(b, c).miss_ratio());
-      }
-    }
-    LinePlotConfig plot;
-    plot.title = "Brick cache miss ratio by budget: " + std::to_string(trace->records.size()) +
-                 " requests, " + std::to_string(profile.distinct_bricks) + " bricks";
-    plot.x_label = "cache budget (MiB, log scale)";
-    plot.y_label = "miss ratio (builds / requests)";
-    plot.log_x = budgets.size() > 1;
-    auto image = render_line_plot(series, plot);
-    if (!image.ok()) return report_command_error(kCommand, image.status().message());
-    const Status written = write_png(args.png_path, image->width, image->height, image->pixels);
-    if (!written.ok()) return report_command_error(kCommand, written.message());
-  }
-  return 0;
+int run_cache_sim(const CacheSimArgs& args) {
+  const Status status = cache_sim(args);
+  return status.ok() ? 0 : report_command_error("cache-sim", status.message());
 }
 
 }  // namespace

@@ -6,7 +6,7 @@
 #include <limits>
 #include <numbers>
 
-#include "core/io/source_factory.h"
+#include "core/io/file_source.h"
 #include "core/util/cancellation.h"
 
 #include "core/gen/splitmix.h"
@@ -82,7 +82,7 @@ Expected<std::unique_ptr<CityGenerator>> CityGenerator::create(const GenSpec& sp
   // A nested generator gets the same limit (a city of cities holds both bases
   // while the outer one is read).
   auto opened =
-      config.of.starts_with("gen:") ? make_generator(config.of, options) : open_triangle_source(config.of);
+      config.of.starts_with("gen:") ? make_generator(config.of, options) : open_triangle_file(config.of);
   if (!opened.ok()) return opened.status().with_context(where);
   std::unique_ptr<TriangleSource> source = std::move(opened).value();
 

@@ -25,27 +25,30 @@ namespace outcore {
 // 4294967295 means "miss", so ids run 0 .. 2^32 - 2.
 inline constexpr uint64_t kMaxGeneratedTriangles = 0xFFFFFFFFull;
 
-class Generator : public TriangleSource {
+class Generator : public TriangleSource, public RangeEmitter {
  public:
   const std::string& description() const override { return description_; }
   Status stream(TriangleSink& sink) override;
-  // Generating runs at 50-250 M triangles/s: faster than any disk round trip.
+  // Generating is faster than any disk round trip (writing and reading back).
   bool cheap_to_restream() const override { return true; }
 
   // Exact number of triangles stream() delivers.
-  virtual uint64_t triangle_count() const = 0;
+  uint64_t triangle_count() const override = 0;
   // Appends the triangles, in primitive-id order, to `out` (without finishing it).
   virtual Status emit(TriangleBatcher& out) const = 0;
   // Appends triangles [first, last) of primitive-id order (last clamped to
   // triangle_count()), bit-identical to those of emit(): disjoint ranges can
   // be generated on several threads and concatenated. The default generates
   // everything and keeps the range, so it costs O(triangle_count()).
-  virtual Status emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const;
+  Status emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const override;
   // True when emit_range costs O(last - first) plus a small setup, so callers
   // may cut the generator into many ranges.
   virtual bool has_fast_ranges() const { return false; }
   // Ranges starting at multiples of this are cheapest (e.g. one city copy).
-  virtual uint64_t range_granularity() const { return 1; }
+  uint64_t range_granularity() const override { return 1; }
+  // Only generators with fast ranges offer them: the default emit_range
+  // generates everything once per range.
+  const RangeEmitter* range_emitter() const override { return has_fast_ranges() ? this : nullptr; }
 
  protected:
   explicit Generator(std::string description) : description_(std::move(description)) {}

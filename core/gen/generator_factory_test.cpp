@@ -7,7 +7,7 @@
 
 #include "core/gen/gen_spec.h"
 #include "core/gen/gen_test_util.h"
-#include "core/io/source_factory.h"
+#include "core/source/source_factory.h"
 
 namespace outcore {
 namespace {

@@ -43,6 +43,26 @@ class TriangleSink {
   virtual Status consume(std::span<const Triangle> batch) = 0;
 };
 
+class TriangleBatcher;
+
+// A capability of sources that can produce any range of their primitive ids
+// on their own (procedural generators): the packer then cuts the input into
+// chunks generated on all cores instead of streaming it once.
+//
+// Thread-safety: const; emit_range() may run on several threads at once.
+class RangeEmitter {
+ public:
+  virtual ~RangeEmitter() = default;
+  // Exact number of triangles of the input.
+  virtual uint64_t triangle_count() const = 0;
+  // Appends triangles [first, last) of primitive-id order (last clamped to
+  // triangle_count()), bit-identical to those of a full stream, in time
+  // O(last - first) plus a small setup; `out` is not finished.
+  virtual Status emit_range(uint64_t first, uint64_t last, TriangleBatcher& out) const = 0;
+  // Ranges starting at multiples of this are cheapest (e.g. one city copy).
+  virtual uint64_t range_granularity() const = 0;
+};
+
 class TriangleSource {
  public:
   virtual ~TriangleSource() = default;
@@ -56,6 +76,9 @@ class TriangleSource {
   // Bytes the source holds for its whole lifetime (a generator's base mesh),
   // which the packer's memory plan must reserve.
   virtual uint64_t held_memory_bytes() const { return 0; }
+  // This source's RangeEmitter when it can emit ranges cheaply; nullptr
+  // otherwise (files: only a full stream is cheap).
+  virtual const RangeEmitter* range_emitter() const { return nullptr; }
 };
 
 // Sink that forwards batches to a callable: Status(std::span<const Triangle>).

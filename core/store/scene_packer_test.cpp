@@ -17,7 +17,7 @@
 #include <thread>
 #include <vector>
 
-#include "core/io/source_factory.h"
+#include "core/source/source_factory.h"
 #include "core/store/scene_store.h"
 #include "core/util/cancellation.h"
 #include "tests/support/test_paths.h"

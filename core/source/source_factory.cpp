@@ -1,0 +1,20 @@
+#include "core/source/source_factory.h"
+
+#include "core/gen/generator_factory.h"
+#include "core/io/file_source.h"
+
+namespace outcore {
+
+Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string& spec,
+                                                               const SourceOptions& options,
+                                                               const HeldMemoryLimit& held) {
+  if (spec.starts_with("gen:")) {
+    GeneratorOptions generator_options;
+    generator_options.mesh_memory_bytes = held.bytes;
+    generator_options.mesh_memory_origin = held.origin;
+    return make_generator(spec, generator_options);
+  }
+  return open_triangle_file(spec, options);
+}
+
+}  // namespace outcore
