@@ -11,7 +11,7 @@ APT_PACKAGES=(
   libembree-dev libopenvdb-dev libcereal-dev libxxhash-dev
   libboost-dev  # OpenVDB's headers include Boost; libopenvdb-dev does not pull it in
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler grpc-proto
-  libspdlog-dev libtbb-dev libtinyobjloader-dev libcli11-dev
+  libspdlog-dev libtbb-dev libcli11-dev
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   python3-venv python3-dev
 )

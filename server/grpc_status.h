@@ -13,4 +13,12 @@ namespace outcore::server {
 
 grpc::Status to_grpc_status(const Status& status);
 
+// Returns a grpc::Status expression's value from the calling function when
+// it is an error.
+#define OUTCORE_RETURN_IF_GRPC_ERROR(expr) \
+  do {                                     \
+    const grpc::Status _status = (expr);   \
+    if (!_status.ok()) return _status;     \
+  } while (false)
+
 }  // namespace outcore::server

@@ -17,12 +17,16 @@
 // (stream_pipeline.h), and chunks that queued up while the engine was busy
 // are traced in one engine call.
 //
+// The handlers are here; the shared-memory call is in shared_memory_call.cpp,
+// the streams in streamed_call.cpp, the wire's shapes in wire_mapping.h.
+//
 // Thread-safety: all handlers may run concurrently (gRPC's sync server calls
-// them from its thread pool); counters are atomics, the engine is thread-safe.
+// them from its thread pool); counters are atomics (service_counters.h), the
+// engine and the buffer pool are thread-safe.
 #pragma once
 
-#include <atomic>
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -32,8 +36,10 @@
 
 #include "core/query/query_engine.h"
 #include "core/ray/query_types.h"
+#include "core/util/reuse_pool.h"
 #include "outcore/v1/scene_query.grpc.pb.h"
 #include "server/ray_batch.h"
+#include "server/service_counters.h"
 #include "server/shared_mapping_cache.h"
 #include "server/stream_pipeline.h"
 
@@ -58,38 +64,23 @@ struct ServiceOptions {
   bool shared_payloads = true;
 };
 
-// A shared-payload call's ray and answer buffers are kept for the next call
-// when together they hold at most this many bytes (1 M rays take 64 MiB), so
-// repeated batches do not fault fresh pages in; larger ones are freed.
+// A call's ray and answer buffers (a shared-payload call's, a stream's
+// groups') are kept for the next call when together they hold at most this
+// many bytes (1 M rays take 64 MiB), so repeated batches do not fault fresh
+// pages in; larger ones are freed. At most kKeptCallBuffers are kept.
+inline constexpr std::size_t kKeptCallBuffers = 2;
 inline constexpr uint64_t kKeepSharedBufferBytes = uint64_t{160} << 20;
 
 // Under a tight budget a stream's chunks are gathered while they keep coming
-// at most this far apart (loopback chunks of 64 k rays arrive ~5 ms apart).
+// at most this far apart: well above the gap between loopback chunks, so a
+// steady stream is gathered whole.
 inline constexpr int64_t kGatherWaitOutOfCore = 50;
 
-// The engine's cost per ray falls with the rays each brick gets per call
-// (1 M incoherent rays on the 732-brick city: 64 k-ray batches cost 1.65x per
-// ray what one 1 M-ray batch does), while on a 3-brick bunny grouping only
-// delays replies (1 M incoherent rays: 0.45 s in 64 k chunks, 0.54 s grouped
-// up to 256 k). So streams are grouped up to this many rays per brick.
+// The engine's cost per ray falls with the rays each brick gets per call,
+// while on a scene of few bricks grouping only delays replies
+// (docs/BENCHMARKS.md, "--stream-group-rays"). So streams are grouped up to
+// this many rays per brick.
 inline constexpr uint64_t kGroupRaysPerBrick = 1024;
-
-// Server-wide figures since start (a snapshot of the atomics).
-struct ServiceCounters {
-  uint64_t requests = 0;            // unary calls + stream chunks answered or refused
-  uint64_t failed_requests = 0;     // cancelled ones included
-  uint64_t cancelled_requests = 0;  // by the client, or by the drain after SIGTERM
-  uint64_t rays = 0;
-  uint64_t rays_hit = 0;
-  uint64_t invalid_rays = 0;
-  double seconds_tracing = 0;
-  // Summed over the requests answered (QueryStats).
-  uint64_t brick_visits = 0;
-  uint64_t proxy_tests = 0;
-  uint64_t bricks_skipped_by_proxy = 0;
-  uint64_t rays_traced_ahead = 0;
-  uint64_t rays_in_brick_set = 0;
-};
 
 // The unary calls are registered as gRPC's "streamed unary" methods: the
 // handler reads the request itself, so bytes that do not parse are answered
@@ -129,23 +120,14 @@ class SceneQueryService final : public SceneQueryBase {
   void check_store();
 
  private:
-  // A stream group's gathered rays and answers, reused across groups.
-  struct GroupBuffers {
+  // A shared-payload call's rays copied out of the client's object and its
+  // answers before they are copied back; a stream group's gathered rays and
+  // answers. Taken from call_buffers_ and given back when the lease ends.
+  struct CallBuffers {
     std::vector<Ray> rays;
     std::vector<uint8_t> answers;  // operator new's alignment suits Hit
   };
-
-  // A shared-payload call's buffers (see kKeepSharedBufferBytes), handed
-  // back to the service's spares when the lease ends, on every return path.
-  struct SharedBuffers {
-    std::vector<Ray> rays;
-    std::vector<uint8_t> answers;
-  };
-  struct SharedBuffersReturn {
-    SceneQueryService* service;
-    void operator()(SharedBuffers* buffers) const;
-  };
-  using SharedBuffersLease = std::unique_ptr<SharedBuffers, SharedBuffersReturn>;
+  static bool worth_keeping(const CallBuffers& buffers);
 
   // The request's rays (in its bytes or widened into `storage`), or the
   // error naming what is wrong: layout, size, reply too large, bad rays.
@@ -165,11 +147,11 @@ class SceneQueryService final : public SceneQueryBase {
   template <QueryKind kKind, class Response>
   grpc::Status answer_shared(grpc::ServerContext* context, const v1::QueryRequest& request,
                              Response* response);
-  SharedBuffersLease take_shared_buffers();
-  // Answers a stream's group of chunks with one engine call, one reply each.
+  // Answers a stream's group of chunks with one engine call, one reply each
+  // (`buffers` gathers a group of several chunks; unused for one).
   template <QueryKind kKind, class Response>
   grpc::Status answer_group(grpc::ServerContext* context, std::span<const std::unique_ptr<StreamChunk>> group,
-                            GroupBuffers& buffers, std::span<const std::unique_ptr<Response>> replies);
+                            CallBuffers* buffers, std::span<const std::unique_ptr<Response>> replies);
   // IntersectStream / OccludedStream. Chunks arrive as bytes and are parsed
   // here: gRPC's typed Read() reports bytes that do not parse as the end of
   // the stream, which would end it OK with the chunk unanswered.
@@ -188,20 +170,9 @@ class SceneQueryService final : public SceneQueryBase {
 
   QueryEngine& engine_;
   const ServiceOptions options_;  // max_group_rays resolved (never 0)
-  std::atomic<uint64_t> requests_{0};
-  std::atomic<uint64_t> failed_requests_{0};
-  std::atomic<uint64_t> cancelled_requests_{0};
-  std::atomic<uint64_t> rays_{0};
-  std::atomic<uint64_t> rays_hit_{0};
-  std::atomic<uint64_t> invalid_rays_{0};
-  std::atomic<uint64_t> nanoseconds_tracing_{0};
-  std::atomic<uint64_t> brick_visits_{0};
-  std::atomic<uint64_t> proxy_tests_{0};
-  std::atomic<uint64_t> bricks_skipped_by_proxy_{0};
-  std::atomic<uint64_t> rays_traced_ahead_{0};
-  std::atomic<uint64_t> rays_in_brick_set_{0};
-  std::mutex shared_buffers_mutex_;
-  std::vector<std::unique_ptr<SharedBuffers>> spare_shared_buffers_;  // at most two
+  AtomicServiceCounters counters_;
+  // Spare CallBuffers (kKeptCallBuffers, kKeepSharedBufferBytes).
+  ReusePool<CallBuffers> call_buffers_{kKeptCallBuffers, &SceneQueryService::worth_keeping};
   std::mutex store_changed_mutex_;
   std::string store_changed_;  // empty while the store on disk is the one opened
   // Client objects of recent shared calls, kept mapped (shared_mapping_cache.h).

@@ -17,12 +17,11 @@
 #include <limits>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <string>
 #include <thread>
 
 #include "core/cli/commands.h"
-#include "core/cli/subtree_options.h"
+#include "core/cli/engine_options_cli.h"
 #include "core/query/query_engine.h"
 #include "core/util/cancellation.h"
 #include "core/util/loopback_address.h"
@@ -42,12 +41,7 @@ constexpr std::chrono::seconds kSummaryInterval{60};
 struct ServeArgs {
   std::string scene;
   std::string listen = "127.0.0.1:50051";
-  uint64_t cache_mb = 1024;
-  std::string policy = "lru";
-  std::string brick_accel = "embree";
-  SubtreeCliOptions subtree;
-  bool no_proxies = false;
-  std::optional<int64_t> proxy_res;  // unset: the default resolution
+  EngineCliOptions engine;
   int threads = 0;
   int rpc_threads = 64;
   uint32_t max_message_mb = 64;
@@ -65,9 +59,10 @@ void log_summary(const server::SceneQueryService& service, const QueryEngine& en
       "{} requests ({} failed, {} cancelled), {} rays ({} hit, {} invalid), {:.3f} s tracing; cache: {} "
       "hits, "
       "{} misses, {} builds, {} evictions, {} bricks / {} bytes resident (peak {}, budget {})",
-      c.requests, c.failed_requests, c.cancelled_requests, c.rays, c.rays_hit, c.invalid_rays,
-      c.seconds_tracing, cache.hits, cache.misses, cache.builds, cache.evictions, cache.resident_bricks,
-      cache.resident_bytes, cache.peak_resident_bytes, engine.cache().budget_bytes());
+      c.requests, c.failed_requests, c.cancelled_requests, c.answered.rays, c.answered.rays_hit,
+      c.answered.invalid_rays, c.answered.seconds_total, cache.hits, cache.misses, cache.builds,
+      cache.evictions, cache.resident_bricks, cache.resident_bytes, cache.peak_resident_bytes,
+      engine.cache().budget_bytes());
   if (engine.cache().subtree_tier() != nullptr) {
     const SubtreeTierCounters& t = cache.subtree;
     spdlog::info("subtree tier: {} loads ({:.3f} s), {} writes, {} rejected, {} files / {} bytes on disk",
@@ -139,6 +134,79 @@ void drain_and_stop(grpc::Server& grpc_server, double drain_s, const server::Sce
   stopper.join();
 }
 
+// The serving options' checks (the engine's, --cache-mb included, are
+// apply_engine_options').
+Status check_serve_args(const ServeArgs& args) {
+  // gRPC takes message limits as int.
+  if (args.max_message_mb == 0 || args.max_message_mb > 2047) {
+    return invalid_argument("--max-message-mb must be between 1 and 2047, got " +
+                            std::to_string(args.max_message_mb));
+  }
+  if (args.threads < 0) return invalid_argument("--threads must be >= 0 (0: all cores)");
+  if (args.stream_group_rays < 0) return invalid_argument("--stream-group-rays must be >= 0 (0: automatic)");
+  if (args.stream_gather_ms > 60'000) {
+    return invalid_argument("--stream-gather-ms must be at most 60000 (-1: automatic)");
+  }
+  if (args.rpc_threads < 2) return invalid_argument("--rpc-threads must be at least 2");
+  if (!(args.drain_s > 0 && args.drain_s <= 3600)) {
+    return invalid_argument("--drain-s must be more than 0 and at most 3600, got " +
+                            std::to_string(args.drain_s));
+  }
+  // Unix sockets have no port; gRPC checks their paths.
+  const bool unix_socket = args.listen.starts_with("unix:") || args.listen.starts_with("unix-abstract:");
+  if (!unix_socket) {
+    const auto port = port_of(args.listen, 0);
+    if (!port.ok()) return invalid_argument("--listen " + port.status().message());
+  }
+  return Status::Ok();
+}
+
+void log_engine(const QueryEngine& engine, const EngineOptions& engine_options) {
+  spdlog::info("brick structure: {} ({}){}", engine_options.brick_accel,
+               describe_accel_options(engine.accel_options()),
+               engine.cache_fits_scene() ? "" : "; the budget cannot hold the scene: trace-ahead on");
+  if (const ProxySet* proxies = engine.proxies()) {
+    const ProxyOpenReport& report = engine.proxy_report();
+    spdlog::info("brick proxies: resolution {}, {} bricks, {} bytes resident, {} in {:.3f} s",
+                 proxies->config().resolution, proxies->brick_count(), proxies->memory_bytes(),
+                 report.loaded ? "loaded from proxies.bin" : (report.written ? "built and written" : "built"),
+                 report.seconds);
+  } else {
+    spdlog::info("brick proxies off");
+  }
+}
+
+server::ServiceOptions service_options_of(const ServeArgs& args) {
+  server::ServiceOptions service_options;
+  service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
+  service_options.max_group_rays = static_cast<uint64_t>(args.stream_group_rays);
+  service_options.gather_wait_ms = args.stream_gather_ms;
+  service_options.shared_payloads = !args.no_shared_payloads;
+  return service_options;
+}
+
+// The gRPC server with `service` registered, listening (null when it cannot
+// listen); *port is the port it listens on.
+std::unique_ptr<grpc::Server> start_grpc_server(const ServeArgs& args, server::SceneQueryService& service,
+                                                uint64_t max_message_bytes, int* port) {
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(args.listen, grpc::InsecureServerCredentials(), port);
+  // gRPC sets SO_REUSEPORT by default: a second server on a taken port would
+  // silently share it. A busy port is an error instead.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  builder.SetMaxReceiveMessageSize(static_cast<int>(max_message_bytes));
+  builder.SetMaxSendMessageSize(static_cast<int>(max_message_bytes));
+  // The sync server runs each call on a thread of its own; the quota bounds
+  // them (calls beyond it wait for a thread).
+  grpc::ResourceQuota quota("outcore-serve");
+  quota.SetMaxThreads(args.rpc_threads);
+  builder.SetResourceQuota(quota);
+  builder.RegisterService(&service);
+  return builder.BuildAndStart();
+}
+
 int run_serve(const ServeArgs& args) {
   // Signals are taken synchronously by this thread (sigtimedwait below), so
   // every thread started from here on (gRPC, TBB) inherits them blocked.
@@ -151,108 +219,35 @@ int run_serve(const ServeArgs& args) {
   spdlog::set_default_logger(spdlog::stderr_color_mt("outcore-serve"));
   spdlog::set_level(spdlog::level::from_str(args.log_level));
 
-  if (args.cache_mb == 0 || args.cache_mb > (std::numeric_limits<uint64_t>::max() >> 20)) {
-    return report_command_error("serve", "--cache-mb must be between 1 and " +
-                                             std::to_string(std::numeric_limits<uint64_t>::max() >> 20) +
-                                             ", got " + std::to_string(args.cache_mb));
-  }
-  // gRPC takes message limits as int.
-  if (args.max_message_mb == 0 || args.max_message_mb > 2047) {
-    return report_command_error(
-        "serve", "--max-message-mb must be between 1 and 2047, got " + std::to_string(args.max_message_mb));
-  }
-  if (args.threads < 0) return report_command_error("serve", "--threads must be >= 0 (0: all cores)");
-  if (args.stream_group_rays < 0) {
-    return report_command_error("serve", "--stream-group-rays must be >= 0 (0: automatic)");
-  }
-  if (args.stream_gather_ms > 60'000) {
-    return report_command_error("serve", "--stream-gather-ms must be at most 60000 (-1: automatic)");
-  }
-  if (args.rpc_threads < 2) return report_command_error("serve", "--rpc-threads must be at least 2");
-  if (!(args.drain_s > 0 && args.drain_s <= 3600)) {
-    return report_command_error(
-        "serve", "--drain-s must be more than 0 and at most 3600, got " + std::to_string(args.drain_s));
-  }
-  // Unix sockets have no port; gRPC checks their paths.
-  const bool unix_socket = args.listen.starts_with("unix:") || args.listen.starts_with("unix-abstract:");
-  if (!unix_socket) {
-    const auto port = port_of(args.listen, 0);
-    if (!port.ok()) return report_command_error("serve", "--listen " + port.status().message());
-  }
-  const auto colon = args.listen.rfind(':');
-
+  const Status checked = check_serve_args(args);
+  if (!checked.ok()) return report_command_error("serve", checked.message());
   std::unique_ptr<tbb::global_control> threads;
   if (args.threads > 0) {
     threads =
         std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, args.threads);
   }
   EngineOptions engine_options;
-  if (args.no_proxies && args.proxy_res) {
-    return report_command_error("serve", "--proxy-res has no effect with --no-proxies; give one of them");
-  }
-  engine_options.proxies = !args.no_proxies;
-  if (args.proxy_res) {
-    if (*args.proxy_res < kMinProxyResolution || *args.proxy_res > kMaxProxyResolution) {
-      return report_command_error(
-          "serve", "--proxy-res must be between " + std::to_string(kMinProxyResolution) + " and " +
-                       std::to_string(kMaxProxyResolution) + ", got " + std::to_string(*args.proxy_res));
-    }
-    engine_options.proxy_config.resolution = static_cast<uint32_t>(*args.proxy_res);
-  }
-  engine_options.cache_bytes = args.cache_mb << 20;
-  engine_options.eviction_policy = args.policy;
-  engine_options.brick_accel = args.brick_accel;
-  const Status subtree = apply_subtree_options(args.subtree, engine_options);
-  if (!subtree.ok()) return report_command_error("serve", subtree.message());
+  const Status options = apply_engine_options(args.engine, engine_options);
+  if (!options.ok()) return report_command_error("serve", options.message());
   auto engine = QueryEngine::open(args.scene, engine_options);
   if (!engine.ok()) return report_command_error("serve", engine.status().message());
-  spdlog::info("brick structure: {} ({}){}", engine_options.brick_accel,
-               describe_accel_options((*engine)->accel_options()),
-               (*engine)->cache_fits_scene() ? "" : "; the budget cannot hold the scene: trace-ahead on");
-  if (const ProxySet* proxies = (*engine)->proxies()) {
-    const ProxyOpenReport& report = (*engine)->proxy_report();
-    spdlog::info("brick proxies: resolution {}, {} bricks, {} bytes resident, {} in {:.3f} s",
-                 proxies->config().resolution, proxies->brick_count(), proxies->memory_bytes(),
-                 report.loaded ? "loaded from proxies.bin" : (report.written ? "built and written" : "built"),
-                 report.seconds);
-  } else {
-    spdlog::info("brick proxies off");
-  }
+  log_engine(**engine, engine_options);
 
-  server::ServiceOptions service_options;
-  service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
-  service_options.max_group_rays = static_cast<uint64_t>(args.stream_group_rays);
-  service_options.gather_wait_ms = args.stream_gather_ms;
-  service_options.shared_payloads = !args.no_shared_payloads;
+  const server::ServiceOptions service_options = service_options_of(args);
   server::SceneQueryService service(**engine, service_options);
-
-  grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
-  grpc::ServerBuilder builder;
   int port = 0;
-  builder.AddListeningPort(args.listen, grpc::InsecureServerCredentials(), &port);
-  // gRPC sets SO_REUSEPORT by default: a second server on a taken port would
-  // silently share it. A busy port is an error instead.
-  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
-  builder.SetMaxReceiveMessageSize(static_cast<int>(service_options.max_message_bytes));
-  builder.SetMaxSendMessageSize(static_cast<int>(service_options.max_message_bytes));
-  // The sync server runs each call on a thread of its own; the quota bounds
-  // them (calls beyond it wait for a thread).
-  grpc::ResourceQuota quota("outcore-serve");
-  quota.SetMaxThreads(args.rpc_threads);
-  builder.SetResourceQuota(quota);
-  builder.RegisterService(&service);
-  std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
+  std::unique_ptr<grpc::Server> server =
+      start_grpc_server(args, service, service_options.max_message_bytes, &port);
   if (!server || port == 0) return report_command_error("serve", "cannot listen on " + args.listen);
   // The health service answers SERVING from here on (the scene is open), for
   // the server as a whole ("") and for the service by name.
   server->GetHealthCheckService()->SetServingStatus(v1::SceneQuery::service_full_name(), true);
-  const std::string address = args.listen.substr(0, colon) + ":" + std::to_string(port);
+  const std::string address = args.listen.substr(0, args.listen.rfind(':')) + ":" + std::to_string(port);
   std::printf("listening on %s\n", address.c_str());
   std::fflush(stdout);
   const Manifest& manifest = (*engine)->store().manifest();
   spdlog::info("serving {} ({} triangles, {} bricks, cache budget {} MiB) on {}", args.scene,
-               manifest.triangle_count, (*engine)->store().brick_count(), args.cache_mb, address);
+               manifest.triangle_count, (*engine)->store().brick_count(), args.engine.cache_mb, address);
 
   const int signal_number = serve_until_stop_signal(stop_signals, service, **engine);
   spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, args.drain_s);
@@ -270,14 +265,9 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("scene", args->scene, "Scene store directory")->required();
   cmd->add_option("--listen", args->listen, "HOST:PORT to listen on (port 0: any free port)")
       ->capture_default_str();
-  cmd->add_option("--cache-mb", args->cache_mb, "Byte budget of the brick cache, MiB")
-      ->capture_default_str()
-      ->check(CLI::Range(uint64_t{1}, std::numeric_limits<uint64_t>::max() >> 20));
-  cmd->add_option("--policy", args->policy, "Cache eviction policy")->capture_default_str();
-  cmd->add_option("--brick-accel", args->brick_accel, "Brick structure")->capture_default_str();
-  add_subtree_options(*cmd, args->subtree);
-  cmd->add_flag("--no-proxies", args->no_proxies, "Do not skip bricks by their occupancy proxies");
-  cmd->add_option("--proxy-res", args->proxy_res,
+  add_cache_options(*cmd, args->engine);
+  cmd->add_flag("--no-proxies", args->engine.no_proxies, "Do not skip bricks by their occupancy proxies");
+  cmd->add_option("--proxy-res", args->engine.proxy_res,
                   "Proxy voxels along each brick's longest side (default 32)");
   cmd->add_option("--threads", args->threads, "Engine worker threads (default: all cores)")
       ->check(CLI::Range(0, 65536));

@@ -14,7 +14,7 @@
 #include <thread>
 
 #include "core/util/loopback_address.h"
-#include "proto/outcore/v1/query_stats_fields.h"
+#include "proto/outcore/v1/query_stats_wire.h"
 #include "proto/outcore/v1/shared_payload_wire.h"
 
 namespace outcore::client {
@@ -45,8 +45,7 @@ uint64_t object_size(uint64_t bytes) {
 }
 
 // memcpy over the cores for the shared-memory copies (32 MiB each way for
-// 1 M hits: about 7 ms on one core of the development machine, where the
-// server is idle meanwhile).
+// 1 M hits), which the server waits on.
 void parallel_copy(void* destination, const void* source, std::size_t bytes) {
   constexpr std::size_t kStep = std::size_t{1} << 20;
   if (bytes <= 2 * kStep) {
@@ -136,10 +135,7 @@ void fill_request(std::span<const Ray> rays, uint64_t sequence, const CallOption
 void add_stats(const v1::QueryStats& from, CallStats* to) {
   if (to == nullptr) return;
   ++to->messages;
-  v1::QueryStats& s = to->engine;
-#define OUTCORE_ADD_WIRE_FIELD(name) s.set_##name(s.name() + from.name());
-  OUTCORE_WIRE_QUERY_STATS(OUTCORE_ADD_WIRE_FIELD)
-#undef OUTCORE_ADD_WIRE_FIELD
+  wire::add_to_wire(wire::from_wire(from), &to->engine);
 }
 
 // A reply must answer exactly the rays its request sent.
@@ -159,12 +155,8 @@ Status check_reply(const Response& response, uint64_t rays, uint32_t bytes_per_r
 
 }  // namespace
 
-QueryStats to_query_stats(const v1::QueryStats& wire) {
-  QueryStats stats;
-#define OUTCORE_GET_WIRE_FIELD(name) stats.name = wire.name();
-  OUTCORE_WIRE_QUERY_STATS(OUTCORE_GET_WIRE_FIELD)
-#undef OUTCORE_GET_WIRE_FIELD
-  return stats;
+QueryStats to_query_stats(const v1::QueryStats& stats) {
+  return wire::from_wire(stats);
 }
 
 Status from_grpc_status(const grpc::Status& status, const std::string& context) {

@@ -1,35 +1,39 @@
 #include "core/query/query_stats.h"
 
+#include <algorithm>
 #include <cstdio>
+#include <string_view>
 
 #include "core/util/json_writer.h"
 
 namespace outcore {
 
+QueryStats& QueryStats::operator+=(const QueryStats& other) {
+#define OUTCORE_STATS_COMBINE(type, name, object, key, combine, ...) \
+  if constexpr (StatsCombine::combine == StatsCombine::kSum) {       \
+    name += other.name;                                              \
+  } else {                                                           \
+    name = std::max(name, other.name);                               \
+  }
+  OUTCORE_QUERY_STATS(OUTCORE_STATS_COMBINE)
+#undef OUTCORE_STATS_COMBINE
+  return *this;
+}
+
 std::string QueryStats::to_json() const {
   JsonWriter j;
   j.begin_object();
-  j.field("rays", rays).field("invalid_rays", invalid_rays).field("rays_hit", rays_hit);
-  j.field("upper_nodes_visited", upper_nodes_visited).field("brick_visits", brick_visits);
-  j.field("rays_in_brick_set", rays_in_brick_set);
-  j.field("proxy_tests", proxy_tests).field("bricks_skipped_by_proxy", bricks_skipped_by_proxy);
-  j.field("proxy_bytes", proxy_bytes);
-  j.field("rays_traced_ahead", rays_traced_ahead);
-  j.field("brick_acquisitions", brick_acquisitions)
-      .field("cache_hits", cache_hits)
-      .field("cache_misses", cache_misses);
-  j.field("brick_builds", brick_builds).field("evictions", evictions);
-  j.field("subtree_loads", subtree_loads).field("subtree_loads_checked", subtree_loads_checked);
-  j.field("subtree_loads_kept", subtree_loads_kept);
-  j.field("subtree_writes", subtree_writes);
-  j.field("subtree_rejects", subtree_rejects).field("subtree_bytes_read", subtree_bytes_read);
-  j.field("subtree_bytes_written", subtree_bytes_written);
-  j.field("peak_bytes_resident", peak_bytes_resident).field("cache_budget_bytes", cache_budget_bytes);
-  j.key("seconds").begin_object();
-  j.field("total", seconds_total).field("upper", seconds_upper).field("build", seconds_build);
-  j.field("brick", seconds_brick).field("proxy", seconds_proxy);
-  j.field("brick_builds_summed", seconds_brick_builds).field("subtree_loads_summed", seconds_subtree_loads);
-  j.end_object();
+  // A nested object's figures are listed together: it opens at the first.
+  std::string_view open_object;
+  for_each_field(*this, [&](const StatsField& field, const auto& value) {
+    if (open_object != field.json_object) {
+      if (!open_object.empty()) j.end_object();
+      open_object = field.json_object;
+      if (!open_object.empty()) j.key(open_object).begin_object();
+    }
+    j.field(field.json_key, value);
+  });
+  if (!open_object.empty()) j.end_object();
   j.field("rays_per_second", seconds_total > 0 ? rays / seconds_total : 0.0);
   j.end_object();
   return j.str();

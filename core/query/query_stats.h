@@ -2,54 +2,143 @@
 // hits, visits, cache and subtree-tier activity, and where the time went.
 // to_json() is the --stats-json format; to_text() the --stats summary.
 //
+// OUTCORE_QUERY_STATS below is the one list of these figures: the struct's
+// members, to_json, the combining of two queries' figures (operator+=), the
+// wire mapping (proto/outcore/v1/query_stats_wire.h) and the server's
+// counters all come from it, so a figure added there reaches every one.
+//
 // Thread-safety: a plain value.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
+#include <type_traits>
 
 namespace outcore {
 
+// How two queries' values of a figure combine into their sum's.
+enum class StatsCombine {
+  kSum,  // counts and times of the queries themselves
+  kMax,  // the engine's state seen by them (peak, budget, proxies' size)
+};
+
+// Where a figure travels besides --stats-json.
+enum class StatsWire {
+  kNo,   // per process: the server reports it in ServerStats instead
+  kYes,  // in outcore.v1.QueryStats, per reply (a sum: kSum only)
+};
+
+// Whether the server sums the figure over the requests it answers and
+// reports the sum in ServerStats under the same name (GetStats).
+enum class StatsServer { kNo, kYes };
+
+// X(type, name, json_object, json_key, combine, wire, server) for each figure,
+// in --stats-json order. json_object is "" for a top-level key, else the
+// nested object's name (its figures are listed together). The JSON ends with
+// rays_per_second, derived from rays and seconds_total.
+//
+// brick_builds, evictions, the subtree_* figures and seconds_brick_builds /
+// seconds_subtree_loads are cache-wide during the query (other batches'
+// builds included); seconds_total is ServerStats.seconds_tracing (summed by
+// the server under that name).
+// clang-format off
+#define OUTCORE_QUERY_STATS(X)                                                                      \
+  X(uint64_t, rays,                    "",        "rays",                    kSum, kYes, kYes)      \
+  X(uint64_t, invalid_rays,            "",        "invalid_rays",            kSum, kYes, kYes)      \
+  X(uint64_t, rays_hit,                "",        "rays_hit",                kSum, kYes, kYes)      \
+  X(uint64_t, upper_nodes_visited,     "",        "upper_nodes_visited",     kSum, kYes, kNo)       \
+  /* (ray, brick) traversals */                                                                     \
+  X(uint64_t, brick_visits,            "",        "brick_visits",            kSum, kYes, kYes)      \
+  /* traced through the resident bricks' one scene (no visits counted) */                           \
+  X(uint64_t, rays_in_brick_set,       "",        "rays_in_brick_set",       kSum, kYes, kYes)      \
+  /* (ray, brick) candidates tested against a proxy; of those, visits avoided */                    \
+  X(uint64_t, proxy_tests,             "",        "proxy_tests",             kSum, kYes, kYes)      \
+  X(uint64_t, bricks_skipped_by_proxy, "",        "bricks_skipped_by_proxy", kSum, kYes, kYes)      \
+  /* the engine's resident proxies (0 without) */                                                   \
+  X(uint64_t, proxy_bytes,             "",        "proxy_bytes",             kMax, kNo,  kNo)       \
+  /* traced at a brick before reaching it (some never do) */                                        \
+  X(uint64_t, rays_traced_ahead,       "",        "rays_traced_ahead",       kSum, kYes, kYes)      \
+  /* times a brick was taken from the cache */                                                      \
+  X(uint64_t, brick_acquisitions,      "",        "brick_acquisitions",      kSum, kYes, kNo)       \
+  X(uint64_t, cache_hits,              "",        "cache_hits",              kSum, kYes, kNo)       \
+  X(uint64_t, cache_misses,            "",        "cache_misses",            kSum, kYes, kNo)       \
+  X(uint64_t, brick_builds,            "",        "brick_builds",            kSum, kYes, kNo)       \
+  X(uint64_t, evictions,               "",        "evictions",               kSum, kYes, kNo)       \
+  /* subtree tier (0 without one): misses served by loading a file; of them */                      \
+  /* those checked in full (first loads) and those on a kept mapping; files */                      \
+  /* written; files refused (corrupt, other version, stale; each then built) */                     \
+  X(uint64_t, subtree_loads,           "",        "subtree_loads",           kSum, kYes, kNo)       \
+  X(uint64_t, subtree_loads_checked,   "",        "subtree_loads_checked",   kSum, kYes, kNo)       \
+  X(uint64_t, subtree_loads_kept,      "",        "subtree_loads_kept",      kSum, kYes, kNo)       \
+  X(uint64_t, subtree_writes,          "",        "subtree_writes",          kSum, kYes, kNo)       \
+  X(uint64_t, subtree_rejects,         "",        "subtree_rejects",         kSum, kYes, kNo)       \
+  X(uint64_t, subtree_bytes_read,      "",        "subtree_bytes_read",      kSum, kYes, kNo)       \
+  X(uint64_t, subtree_bytes_written,   "",        "subtree_bytes_written",   kSum, kYes, kNo)       \
+  X(uint64_t, peak_bytes_resident,     "",        "peak_bytes_resident",     kMax, kNo,  kNo)       \
+  X(uint64_t, cache_budget_bytes,      "",        "cache_budget_bytes",      kMax, kNo,  kNo)       \
+  X(double,   seconds_total,           "seconds", "total",                   kSum, kYes, kNo)       \
+  /* first upper-hierarchy pass for every ray */                                                    \
+  X(double,   seconds_upper,           "seconds", "upper",                   kSum, kYes, kNo)       \
+  /* waiting for bricks: load + build (or another batch's build) */                                 \
+  X(double,   seconds_build,           "seconds", "build",                   kSum, kYes, kNo)       \
+  /* tracing inside bricks, plus finding each ray's next brick */                                   \
+  X(double,   seconds_brick,           "seconds", "brick",                   kSum, kYes, kNo)       \
+  /* proxy tests, summed over threads (part of upper and brick) */                                  \
+  X(double,   seconds_proxy,           "seconds", "proxy",                   kSum, kYes, kNo)       \
+  /* summed over threads: store load + build of the bricks built, and */                            \
+  /* subtree file load + deserialise of the bricks loaded instead */                                \
+  X(double,   seconds_brick_builds,    "seconds", "brick_builds_summed",     kSum, kYes, kNo)       \
+  X(double,   seconds_subtree_loads,   "seconds", "subtree_loads_summed",    kSum, kYes, kNo)
+// clang-format on
+
+// What the list says about one figure.
+struct StatsField {
+  const char* name;
+  const char* json_object;
+  const char* json_key;
+  StatsCombine combine;
+  StatsWire wire;
+  StatsServer server;
+};
+
+// query_stats_fields::NAME: the list's entry for figure NAME (compile time,
+// e.g. for checks that another list names only figures that fit it).
+namespace query_stats_fields {
+#define OUTCORE_STATS_FIELD_INFO(type, name, object, key, combine, wire, server) \
+  inline constexpr StatsField name{                                              \
+      #name, object, key, StatsCombine::combine, StatsWire::wire, StatsServer::server};
+OUTCORE_QUERY_STATS(OUTCORE_STATS_FIELD_INFO)
+#undef OUTCORE_STATS_FIELD_INFO
+}  // namespace query_stats_fields
+
+#define OUTCORE_STATS_COUNT_FIELD(...) +1
+inline constexpr std::size_t kQueryStatsFieldCount = 0 OUTCORE_QUERY_STATS(OUTCORE_STATS_COUNT_FIELD);
+#undef OUTCORE_STATS_COUNT_FIELD
+
 struct QueryStats {
-  uint64_t rays = 0;
-  uint64_t invalid_rays = 0;
-  uint64_t rays_hit = 0;
-  uint64_t upper_nodes_visited = 0;
-  uint64_t brick_visits = 0;             // (ray, brick) traversals
-  uint64_t rays_in_brick_set = 0;        // traced through the resident bricks' one scene (no visits counted)
-  uint64_t rays_traced_ahead = 0;        // traced at a brick before reaching it (some never do)
-  uint64_t proxy_tests = 0;              // (ray, brick) candidates tested against a proxy
-  uint64_t bricks_skipped_by_proxy = 0;  // of those, visits avoided (the ray cannot hit the brick)
-  uint64_t proxy_bytes = 0;              // the engine's resident proxies (0 without)
-  uint64_t brick_acquisitions = 0;       // times a brick was taken from the cache
-  uint64_t cache_hits = 0;
-  uint64_t cache_misses = 0;
-  uint64_t brick_builds = 0;  // cache-wide during this query (others' batches included)
-  uint64_t evictions = 0;     // likewise
-  // The subtree tier, likewise cache-wide (all 0 without one): misses served
-  // by loading a file instead of building, files written, their bytes, and
-  // files refused (corrupt, other version, stale; each then built).
-  uint64_t subtree_loads = 0;
-  uint64_t subtree_loads_checked = 0;  // of the loads, those that checked the file in full (first loads)
-  uint64_t subtree_loads_kept = 0;     // of the loads, those that reused a kept mapping (no open or mmap)
-  uint64_t subtree_writes = 0;
-  uint64_t subtree_rejects = 0;
-  uint64_t subtree_bytes_read = 0;
-  uint64_t subtree_bytes_written = 0;
-  uint64_t peak_bytes_resident = 0;
-  uint64_t cache_budget_bytes = 0;
-  double seconds_total = 0;
-  double seconds_upper = 0;  // first upper-hierarchy pass for every ray
-  double seconds_build = 0;  // waiting for bricks: load + build (or another batch's build)
-  double seconds_brick = 0;  // tracing inside bricks, plus finding each ray's next brick
-  double seconds_proxy = 0;  // proxy tests, summed over threads (part of upper and brick)
-  // Cache-wide, summed over threads: store load + build of the bricks built,
-  // and subtree file load + deserialise of the bricks loaded instead.
-  double seconds_brick_builds = 0;
-  double seconds_subtree_loads = 0;
+#define OUTCORE_STATS_MEMBER(type, name, ...) type name = 0;
+  OUTCORE_QUERY_STATS(OUTCORE_STATS_MEMBER)
+#undef OUTCORE_STATS_MEMBER
+
+  // Combines `other` into this, figure by figure as the list says (sum or max).
+  QueryStats& operator+=(const QueryStats& other);
+  QueryStats& add(const QueryStats& other) {
+    return *this += other;
+  }
 
   std::string to_json() const;
   std::string to_text() const;
 };
+
+// Calls f(field, value) for each figure in list order, `value` a reference
+// to the member (uint64_t or double; const when `stats` is).
+template <class Stats, class F>
+requires std::is_same_v<std::remove_const_t<Stats>, QueryStats>
+void for_each_field(Stats& stats, F&& f) {
+#define OUTCORE_STATS_VISIT(type, name, ...) f(query_stats_fields::name, stats.name);
+  OUTCORE_QUERY_STATS(OUTCORE_STATS_VISIT)
+#undef OUTCORE_STATS_VISIT
+}
 
 }  // namespace outcore

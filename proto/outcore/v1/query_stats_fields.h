@@ -1,11 +1,11 @@
 // The figures outcore.v1.QueryStats (scene_query.proto) carries, each under
-// the name it has in outcore::QueryStats (core/query/query_engine.h), in field
-// order: OUTCORE_WIRE_QUERY_STATS(X) expands X(name) for each. The server
-// fills the wire's figures from the engine's with it
-// (server/scene_query_service.cpp) and the C++ client sums replies and turns
-// them back into the engine's (client/cpp/scene_client.cpp), so a field added
-// to the message and listed here reaches both; a test checks that the list
-// and the message agree (tests/server_api_test.cpp). Every one is a sum.
+// the name it has in outcore::QueryStats (core/query/query_stats.h), in field
+// order: OUTCORE_WIRE_QUERY_STATS(X) expands X(name) for each. It is the
+// wire's subset of OUTCORE_QUERY_STATS, kept here in proto order because the
+// proto decides it: query_stats_wire.h maps with it (server and C++ client)
+// and checks at compile time that it names exactly the figures the one list
+// marks as on the wire (all sums); a test checks it against the message
+// (tests/server_api_test.cpp).
 //
 // Thread-safety: a macro; no state.
 #pragma once

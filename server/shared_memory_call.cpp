@@ -1,0 +1,76 @@
+// The shared-memory unary call: a request whose rays are in the client's
+// shared-memory object (shared_payload.h) is answered into that object, in
+// groups of kSharedGroupRays through reused buffers, from loopback peers only.
+//
+// Thread-safety: as the service's handlers (scene_query_service.h).
+#include <grpcpp/grpcpp.h>
+
+#include <algorithm>
+#include <span>
+#include <string>
+
+#include "proto/outcore/v1/shared_payload_wire.h"
+#include "server/grpc_status.h"
+#include "server/scene_query_service.h"
+#include "server/shared_payload.h"
+#include "server/wire_mapping.h"
+
+namespace outcore::server {
+
+template <QueryKind kKind, class Response>
+grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, const v1::QueryRequest& request,
+                                              Response* response) {
+  using Traits = KindTraits<kKind>;
+  const auto refuse = [&](const std::string& why) {
+    // The marker tells clients "send bytes from now on" apart from a failed call.
+    context->AddTrailingMetadata(wire::kSharedRefusedKey, wire::kSharedRefusedValue);
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, why + "; send the rays in batch.rays");
+  };
+  if (!options_.shared_payloads) return refuse("this server runs with --no-shared-payloads");
+  if (!is_loopback_peer(context->peer())) {
+    return refuse("shared payloads are accepted from loopback peers only, not from " + context->peer());
+  }
+  auto object = open_shared_payload(request, Traits::kReplyBytesPerRay, shared_mappings_);
+  if (!object.ok()) {
+    if (object.status().code() == StatusCode::kFailedPrecondition) return refuse(object.status().message());
+    return to_grpc_status(object.status().with_context("request"));
+  }
+  const uint64_t n = request.batch().ray_count();
+  const ReusePool<CallBuffers>::Lease buffers = call_buffers_.take();
+  v1::QueryStats* wire_stats = response->mutable_stats();
+  // Groups in order, so under strict mode the first bad ray found is the
+  // call's first (earlier groups had none). An empty batch is one empty group.
+  const uint64_t groups = std::max<uint64_t>(1, (n + kSharedGroupRays - 1) / kSharedGroupRays);
+  for (uint64_t group = 0; group < groups; ++group) {
+    const uint64_t first = group * kSharedGroupRays;
+    const uint64_t count = std::min(kSharedGroupRays, n - first);
+    OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n - first));
+    const Status read = read_shared_rays(**object, request, first, count, buffers->rays);
+    if (!read.ok()) return to_grpc_status(read.with_context("request"));
+    const std::span<const Ray> rays(buffers->rays.data(), count);
+    BatchPosition position;
+    position.first_ray = first;
+    if (const Status bad = check_rays(rays, position, request.strict()); !bad.ok())
+      return to_grpc_status(bad);
+    const uint64_t answer_bytes = count * Traits::kReplyBytesPerRay;
+    if (buffers->answers.size() < answer_bytes) buffers->answers.resize(answer_bytes);
+    QueryStats stats;
+    const Status status = trace<kKind>(rays, buffers->answers.data(), request, &stats);
+    if (!status.ok()) return to_grpc_status(status);
+    const Status written =
+        write_shared_answers(**object, request.shared(), first * Traits::kReplyBytesPerRay,
+                             std::span<const uint8_t>(buffers->answers.data(), answer_bytes));
+    if (!written.ok()) return to_grpc_status(written.with_context("request"));
+    wire::add_to_wire(stats, wire_stats);
+  }
+  set_reply_header(response, n, request.sequence());
+  response->set_answers_in_shared(true);
+  return grpc::Status::OK;
+}
+
+template grpc::Status SceneQueryService::answer_shared<QueryKind::kClosestHit, v1::IntersectResponse>(
+    grpc::ServerContext*, const v1::QueryRequest&, v1::IntersectResponse*);
+template grpc::Status SceneQueryService::answer_shared<QueryKind::kAnyHit, v1::OccludedResponse>(
+    grpc::ServerContext*, const v1::QueryRequest&, v1::OccludedResponse*);
+
+}  // namespace outcore::server
