@@ -77,7 +77,7 @@ enum class StatsServer { kNo, kYes };
   X(uint64_t, subtree_bytes_written,   "",        "subtree_bytes_written",   kSum, kYes, kNo)       \
   X(uint64_t, peak_bytes_resident,     "",        "peak_bytes_resident",     kMax, kNo,  kNo)       \
   X(uint64_t, cache_budget_bytes,      "",        "cache_budget_bytes",      kMax, kNo,  kNo)       \
-  X(double,   seconds_total,           "seconds", "total",                   kSum, kYes, kNo)       \
+  X(double,   seconds_total,           "seconds", "total",                   kSum, kYes, kYes)      \
   /* first upper-hierarchy pass for every ray */                                                    \
   X(double,   seconds_upper,           "seconds", "upper",                   kSum, kYes, kNo)       \
   /* waiting for bricks: load + build (or another batch's build) */                                 \
