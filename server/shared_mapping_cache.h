@@ -1,11 +1,10 @@
 // SharedMappingCache: the shared-memory objects of recent shared calls
 // (proto SharedPayload), kept mapped between calls. A client reuses one
 // object for call after call; mapping its rays and answers again each time
-// (mmap with MAP_POPULATE, then munmap) cost ~6 ms of a ~80 ms call of 1 M
-// camera rays. A call whose name still names the same object (same device,
-// inode and size: one shm_open and fstat) and whose ranges lie inside the
-// kept mapping reuses it; otherwise the object is mapped afresh and kept.
-// The token is still checked on every call, by the caller.
+// (mmap with MAP_POPULATE, then munmap) is a noticeable share of a large
+// call (docs/BENCHMARKS_HISTORY.md, "kept mappings"). A call whose name still names the same object (same
+// device, inode and size: one shm_open and fstat) and whose ranges lie inside the kept mapping reuses it;
+// otherwise the object is mapped afresh and kept. The token is still checked on every call, by the caller.
 //
 // Bounds: at most max_objects mappings (least recently used dropped first),
 // and a kept mapping whose object was unlinked (its client closed it or

@@ -9,9 +9,8 @@
 // flow control let the whole reply out, then wait for the next chunk, with the
 // engine idle meanwhile. And while the engine is busy, the chunks that arrive
 // queue up; the tracer takes them all (up to max_group_rays) into one engine
-// call, because the engine is much cheaper per ray on big batches (1 M
-// incoherent rays on the 15 M-triangle city: 64 k-ray batches cost 1.65x as
-// much per ray as one 1 M-ray batch; docs/BENCHMARKS.md). A fast engine thus
+// call, because the engine is much cheaper per ray on big batches
+// (docs/BENCHMARKS_HISTORY.md, "--stream-group-rays"). A fast engine thus
 // gets small batches and full overlap, a busy one big batches.
 //
 // Only the handler thread ever calls Read: the handler returns (ending the
@@ -33,7 +32,7 @@
 // replies are unwritten and two are still queued for the writer: a reply
 // being written and one queued while the next group is traced (without that
 // allowance, a chunk larger than max_group_rays would make tracing wait for
-// each write: measured 17-27 ms per 1 M bunny rays in 65,536-ray chunks).
+// each write).
 //
 // Thread-safety: push/spare_chunk/close_and_wait are for the handler thread,
 // take_group/recycle/acquire_reply/post_replies/fail for the tracer thread

@@ -13,8 +13,8 @@
 #include <string>
 #include <vector>
 
-#include "core/io/source_factory.h"
 #include "core/ray/ray_types.h"
+#include "core/source/source_factory.h"
 #include "core/store/brick_data.h"
 
 namespace outcore::accel_test {

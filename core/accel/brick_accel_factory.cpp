@@ -17,25 +17,10 @@ std::string joined(const std::vector<std::string>& names) {
   return out;
 }
 
-// Defaults: robust=0, quality=medium. Measured on the bunny (69,451
-// triangles, one brick), 1M incoherent rays, one thread, best of 8 alternated
-// runs in each of three sessions (EmbreeBrickMeasure.DISABLED_DefaultChoice):
-//
-//   robust quality   build (1 thread)   intersect, M rays/s
-//   0      low       0.010-0.011 s      2.2-2.6
-//   0      medium    0.031-0.035 s      2.8-3.2   <- default
-//   0      high      0.139-0.166 s      2.5-3.1
-//   1      low       0.010-0.011 s      2.0-2.1
-//   1      medium    0.032-0.033 s      2.3-2.6
-//   1      high      0.031-0.036 s      2.4-2.8
-//
-// Medium traced fastest in every session (high, with spatial splits, was
-// never faster on a mesh of evenly sized triangles) and builds 4-5x faster
-// than high, whose spatial splits also cost up to 15% more peak memory and
-// take 17x longer on 1M large overlapping triangles (6.6 s against 0.38 s,
-// two threads). Robust costs
-// 10-20% of trace speed for a watertightness the float64-reference tests did
-// not need; it stays available for closed-mesh work.
+// Defaults: robust=0, quality=medium: medium traced fastest and builds several
+// times faster than high; robust costs trace speed for a watertightness the
+// float64-reference tests did not need (figures: docs/BENCHMARKS_HISTORY.md,
+// "Embree brick defaults").
 Expected<std::unique_ptr<BrickBuilder>> make_embree_builder(const BrickAccelOptions& options) {
   EmbreeBrickConfig config;
   for (const auto& [key, value] : options) {

@@ -80,23 +80,21 @@ Vec3f unit_normal(const Triangle& tri) {
 // origins lie within kCoherentOriginSpread of the brick's size — camera,
 // lidar or light-probe rays, sorted — is traced as one stream with
 // RTC_INTERSECT_CONTEXT_FLAG_COHERENT (rtcIntersect1M / rtcOccluded1M), which
-// Embree traverses as packets: measured 1.5-2x faster for 1024^2 camera rays
-// on the bunny, but 3x slower than rtcIntersect1 for incoherent rays, hence
-// the test. Any other run goes through rtcIntersect1 / rtcOccluded1 ray by
-// ray. (Runs, not whole chunks: 256 consecutive pixels of a row-major
-// 1000-pixel-wide image span 13 degrees and fail the test; 64 span 3.) Both paths give bitwise identical t,
-// u, v (checked by the tests), and ties are settled by the tie filter in both, so the answer does not depend
-// on which path a ray took, i.e. on the batch it came in.
+// Embree traverses as packets: faster for camera rays, far slower than
+// rtcIntersect1 for incoherent ones, hence the test. Any other run goes through rtcIntersect1 / rtcOccluded1
+// ray by ray. (Runs, not whole chunks: 256 consecutive pixels of a row-major 1000-pixel-wide image span 13
+// degrees and fail the test; 64 span 3.) Both paths give bitwise identical t, u, v (checked by the tests),
+// and ties are settled by the tie filter in both, so the answer does not depend on which path a ray took,
+// i.e. on the batch it came in.
 constexpr std::size_t kChunk = 256;
 constexpr std::size_t kRun = 64;
 constexpr std::size_t kCoherentMinRays = 16;
 constexpr float kCoherentDirectionSpread = 0.1f;
 // ... and within this fraction of the angle the brick subtends from the
 // run's first origin: a run of camera rays that sweeps across a brick small
-// on screen (a sphere of the city seen from afar) is no packet to Embree —
-// measured 1.5x slower as a stream than ray by ray on the city's camera rays,
-// while on the bunny, whose bricks fill the view, streams are 1.4x faster
-// (fractions 0.25 and 0.5 cost the bunny 5-10%, 1 nothing).
+// on screen (a sphere of the city seen from afar) is no packet to Embree and
+// runs slower as a stream than ray by ray (docs/BENCHMARKS_HISTORY.md,
+// "Embree brick defaults").
 constexpr float kCoherentAngularFraction = 1.0f;
 constexpr float kCoherentOriginSpread = 0.1f;
 

@@ -1,6 +1,6 @@
 // SchedulePolicy ("schedule"): schedule-aware eviction, Belady's rule on the
 // known part of the future. The engine knows which bricks its queued rays will
-// need (each ray's window of upcoming bricks, core/query/query_engine.cpp) and
+// need (each ray's window of upcoming bricks, core/query/ray_walk.h) and
 // hands the cache that knowledge as a schedule hint (on_schedule_hint:
 // bricks, soonest first). To choose a victim:
 // - a resident brick absent from the hint is needed by no queued ray: evict

@@ -33,7 +33,7 @@ struct PackOptions {
   // Target brick size: no brick holds more triangles than this. Unset (the
   // default): kDefaultBrickTriangles, except that a scene of at most
   // kSmallSceneTriangles triangles is packed as one brick (a brick that
-  // small, ~20 MiB built, gains nothing from being loaded and built in parts,
+  // small, a few MiB built, gains nothing from being loaded and built in parts,
   // and one brick spares every ray a level of traversal: docs/DESIGN.md).
   std::optional<uint32_t> brick_triangles;
   // Peak memory bound for the packer's own data, in MiB (>= 32).

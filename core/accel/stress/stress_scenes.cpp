@@ -9,7 +9,7 @@
 #include <utility>
 
 #include "core/accel/bvh/double_triangle_test.h"
-#include "core/io/source_factory.h"
+#include "core/source/source_factory.h"
 #include "core/store/scene_packer.h"
 
 namespace outcore {
