@@ -99,22 +99,38 @@ Expected<std::unique_ptr<BrickBuilder>> make_bvh_builder(const BrickAccelOptions
   return std::unique_ptr<BrickBuilder>(new BvhBrickBuilder(config));
 }
 
+Expected<std::unique_ptr<BrickBuilder>> make_reference_builder(const BrickAccelOptions& options) {
+  if (!options.empty()) {
+    return invalid_argument("brick accel reference: unknown option '" + options.begin()->first +
+                            "' (it takes none)");
+  }
+  return std::unique_ptr<BrickBuilder>(new ReferenceBrickBuilder());
+}
+
+// Every brick structure, by the name users give it: a new structure is one
+// line here (and its BrickAccel, BrickBuilder and optional BrickSerializer).
+struct BrickStructureEntry {
+  const char* name;
+  Expected<std::unique_ptr<BrickBuilder>> (*make)(const BrickAccelOptions& options);
+};
+constexpr BrickStructureEntry kBrickStructures[] = {
+    {"embree", make_embree_builder},
+    {"bvh", make_bvh_builder},
+    {"reference", make_reference_builder},
+};
+
 }  // namespace
 
 std::vector<std::string> brick_accel_names() {
-  return {"embree", "bvh", "reference"};
+  std::vector<std::string> names;
+  for (const BrickStructureEntry& entry : kBrickStructures) names.emplace_back(entry.name);
+  return names;
 }
 
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options) {
-  if (name == "embree") return make_embree_builder(options);
-  if (name == "bvh") return make_bvh_builder(options);
-  if (name == "reference") {
-    if (!options.empty()) {
-      return invalid_argument("brick accel reference: unknown option '" + options.begin()->first +
-                              "' (it takes none)");
-    }
-    return std::unique_ptr<BrickBuilder>(new ReferenceBrickBuilder());
+  for (const BrickStructureEntry& entry : kBrickStructures) {
+    if (name == entry.name) return entry.make(options);
   }
   return not_found("unknown brick accel '" + name + "' (known: " + joined(brick_accel_names()) + ")");
 }

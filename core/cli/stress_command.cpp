@@ -1,5 +1,5 @@
 // `outcore stress`: the numerical stress suite as a report (one table, a row
-// per case and configuration; core/accel/stress). Exit code 0 unless a
+// per case and configuration; core/stress). Exit code 0 unless a
 // configuration that must not leak (bvh-watertight, bvh-double) leaked or
 // answered differently across brick seams, or the suite could not run.
 #include <CLI/CLI.hpp>
@@ -14,9 +14,9 @@
 #include <system_error>
 #include <vector>
 
-#include "core/accel/stress/stress_runner.h"
-#include "core/accel/stress/stress_scenes.h"
 #include "core/cli/commands.h"
+#include "core/stress/stress_runner.h"
+#include "core/stress/stress_scenes.h"
 
 namespace outcore {
 namespace {

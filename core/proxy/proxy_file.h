@@ -22,11 +22,11 @@
 
 #include "core/proxy/proxy_set.h"
 #include "core/store/manifest.h"
+#include "core/store/store_format.h"
 #include "core/util/status.h"
 
 namespace outcore {
 
-inline constexpr char kProxyFileName[] = "proxies.bin";
 // 2: margins grown with the scene's reach (proxy_builder.h); 1 files are rebuilt.
 inline constexpr uint32_t kProxyFormatVersion = 2;
 inline constexpr char kProxyMagic[8] = {'O', 'C', 'P', 'R', 'O', 'X', 'Y', '\x1a'};

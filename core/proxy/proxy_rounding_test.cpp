@@ -15,8 +15,8 @@
 #include <random>
 #include <vector>
 
-#include "core/accel/stress/stress_runner.h"
 #include "core/proxy/proxy_builder.h"
+#include "core/stress/stress_runner.h"
 
 namespace outcore {
 namespace {

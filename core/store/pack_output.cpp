@@ -5,7 +5,6 @@
 #include <cstring>
 #include <fstream>
 
-#include "core/proxy/proxy_file.h"
 #include "core/store/manifest.h"
 #include "core/store/store_format.h"
 #include "core/util/temporary_directory.h"

@@ -17,6 +17,8 @@ namespace outcore {
 inline constexpr uint32_t kStoreFormatVersion = 1;
 inline constexpr char kManifestFileName[] = "manifest.bin";
 inline constexpr char kBrickDataFileName[] = "bricks.dat";
+// The bricks' occupancy proxies (core/proxy/proxy_file.h), cached beside them.
+inline constexpr char kProxyFileName[] = "proxies.bin";
 inline constexpr uint64_t kBrickAlignment = 4096;
 
 // 8-byte magics; the last byte guards against text-mode mangling.
@@ -41,7 +43,9 @@ struct BrickHeader {
 };
 static_assert(sizeof(BrickHeader) == 32);
 
-inline constexpr uint64_t brick_payload_bytes(uint64_t triangles) { return triangles * (36 + 8); }
+inline constexpr uint64_t brick_payload_bytes(uint64_t triangles) {
+  return triangles * (36 + 8);
+}
 inline constexpr uint64_t brick_total_bytes(uint64_t triangles) {
   return sizeof(BrickHeader) + brick_payload_bytes(triangles);
 }

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "core/accel/stress/stress_runner.h"
-#include "core/accel/stress/stress_scenes.h"
+#include "core/stress/stress_runner.h"
+#include "core/stress/stress_scenes.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {

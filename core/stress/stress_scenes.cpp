@@ -1,4 +1,4 @@
-#include "core/accel/stress/stress_scenes.h"
+#include "core/stress/stress_scenes.h"
 
 #include <algorithm>
 #include <cmath>

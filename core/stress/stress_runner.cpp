@@ -1,4 +1,4 @@
-#include "core/accel/stress/stress_runner.h"
+#include "core/stress/stress_runner.h"
 
 #include <algorithm>
 #include <cmath>

@@ -23,7 +23,7 @@
 #include <vector>
 
 #include "core/accel/brick_accel_factory.h"
-#include "core/accel/stress/stress_scenes.h"
+#include "core/stress/stress_scenes.h"
 #include "core/util/status.h"
 
 namespace outcore {
