@@ -6,7 +6,16 @@
 #include <string>
 #include <utility>
 
+#include "core/accel/brick_accel_factory.h"
+
 namespace outcore {
+
+namespace {
+bool saves_bricks(const std::string& brick_accel) {
+  auto builder = make_brick_builder(brick_accel, {});
+  return builder.ok() && (*builder)->serializer() != nullptr;
+}
+}  // namespace
 
 void add_subtree_options(CLI::App& command, SubtreeCliOptions& options) {
   command.add_option("--subtree-dir", options.dir,
@@ -35,9 +44,13 @@ Status apply_subtree_options(const SubtreeCliOptions& cli, EngineOptions& option
     }
     return Status::Ok();
   }
-  // Only bvh bricks can be serialised (BrickBuilder::serializer()).
-  if (options.brick_accel != "bvh") {
-    return invalid_argument("--subtree-dir needs --brick-accel bvh (got '" + options.brick_accel +
+  // Only structures whose builder offers a BrickSerializer can be saved.
+  if (!saves_bricks(options.brick_accel)) {
+    std::string savable;
+    for (const std::string& name : brick_accel_names()) {
+      if (saves_bricks(name)) savable += (savable.empty() ? "" : "|") + name;
+    }
+    return invalid_argument("--subtree-dir needs --brick-accel " + savable + " (got '" + options.brick_accel +
                             "', whose bricks cannot be saved)");
   }
   for (const auto& [name, mib] : {std::pair{"--subtree-dir-mb", cli.dir_mb},
