@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Run time against error, per brick-structure configuration (issue 5).
+"""Run time against error, per brick-structure configuration (issues 5, 23).
 
-For each configuration (embree, embree-robust, bvh-mt, bvh-watertight,
-bvh-double) and Open3D 0.20's RaycastingScene as a reference point, all in
+For each configuration (default, embree, embree-robust, bvh-mt,
+bvh-watertight, bvh-double) and Open3D 0.20's RaycastingScene as a reference point, all in
 the same run, 2 threads each:
 - speed: M rays/s on N incoherent rays (bench/make_rays.py) per scene, the
   median of the warm runs of `outcore trace --repeat R` (engine time), and of
@@ -12,7 +12,7 @@ the same run, 2 threads each:
   (both triangles at a t within 1e-6 relative of each other, as computed by
   the reference rule); and the max relative t error where the triangle agrees;
 - leak rate on aimed rays: rays from an interior point of a closed mesh
-  (icosphere, torus, and the icosphere moved to +1e5) aimed exactly at every
+  (icosphere, torus, and both moved to offsets of 1e5 and 1e6) aimed exactly at every
   vertex and edge midpoint (direction = target - origin in float32, as the
   stress suite does); any miss is a leak.
 
@@ -36,8 +36,9 @@ from common import HIT_DTYPE, OUTCORE, ROOT, open3d_scene, open3d_timed_cast, re
 
 MODELS = os.path.join(ROOT, "tests", "data", "models")
 CONFIGS = {
-    "embree": [],
-    "embree-robust": ["--accel-opt", "robust=1"],
+    "default": [],  # no structure option: what a user gets (bvh, watertight, since issue 23)
+    "embree": ["--brick-accel", "embree"],
+    "embree-robust": ["--brick-accel", "embree", "--accel-opt", "robust=1"],
     "bvh-mt": ["--brick-accel", "bvh", "--triangle-test", "mt"],
     "bvh-watertight": ["--brick-accel", "bvh", "--triangle-test", "watertight"],
     "bvh-double": ["--brick-accel", "bvh", "--triangle-test", "double"],
@@ -47,12 +48,15 @@ SPEED_SCENES = {
     "homer": [os.path.join(MODELS, "homer.obj")],
     "sphere-l7": ["gen:sphere?level=7"],
     "city": ["gen:city?of=(gen:sphere?level=3)&copies=400"],
+    "sphere-l7 +1e6": ["gen:sphere?level=7&cx=1e6&cy=-1e6&cz=1e6"],
 }
 # Closed meshes and an interior point of each.
 AIMED_SCENES = {
     "sphere": ("gen:sphere?level=5", (0.0, 0.0, 0.0)),
     "torus": ("gen:torus", (1.0, 0.0, 0.0)),
     "sphere +1e5": ("gen:sphere?level=5&cx=1e5&cy=1e5&cz=1e5", (1e5, 1e5, 1e5)),
+    "sphere +1e6": ("gen:sphere?level=5&cx=1e6&cy=-1e6&cz=1e6", (1e6, -1e6, 1e6)),
+    "torus +1e6": ("gen:torus?cx=1e6&cy=1e6&cz=-1e6", (1e6 + 1.0, 1e6, -1e6)),
 }
 TIE = 1e-6
 def pack(work, name, inputs, brick_tris):

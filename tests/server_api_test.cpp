@@ -501,7 +501,7 @@ TEST_F(ServerApi, SceneInfoDescribesTheStore) {
   ASSERT_EQ(info.bounds_lo_size(), 3);
   EXPECT_EQ(info.bounds_lo(0), manifest.bounds.lo.x);
   EXPECT_EQ(info.bounds_hi(2), manifest.bounds.hi.z);
-  EXPECT_EQ(info.brick_accel(), "embree");
+  EXPECT_EQ(info.brick_accel(), kDefaultBrickAccel);
   EXPECT_EQ(info.server_version(), OUTCORE_VERSION);
   EXPECT_EQ(info.upper_depth(), manifest.upper.depth());
 }

@@ -106,7 +106,8 @@ TEST_F(AccuracyCli, ReferenceAgreesWithTheBruteForceAndWithBvhDouble) {
 
 TEST_F(AccuracyCli, TriangleTestAndReferenceOptionsAreChecked) {
   const std::string out = dir_.file("h.npy");
-  auto r = outcore({"trace", store_, "--rays", rays_path_, "-o", out, "--triangle-test", "mt"});
+  auto r = outcore(
+      {"trace", store_, "--rays", rays_path_, "-o", out, "--brick-accel", "embree", "--triangle-test", "mt"});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.stderr_text, "--brick-accel bvh")) << r.stderr_text;
   r = outcore(
@@ -117,7 +118,7 @@ TEST_F(AccuracyCli, TriangleTestAndReferenceOptionsAreChecked) {
                "mt", "--accel-opt", "triangle_test=double"});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.stderr_text, "both given")) << r.stderr_text;
-  r = outcore({"trace", store_, "--rays", rays_path_, "-o", out, "--reference", "--brick-accel", "bvh"});
+  r = outcore({"trace", store_, "--rays", rays_path_, "-o", out, "--reference", "--brick-accel", "embree"});
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_TRUE(contains(r.stderr_text, "--reference")) << r.stderr_text;
   // Any-hit with the reference agrees with its closest hits.

@@ -585,7 +585,8 @@ TEST_F(TraceCli, UnknownPolicyAccelAndAccelOptionAreRejectedByName) {
   expect_trace_fails(trace(rays_path_, h, {"--policy", "no_such_policy"}), h, {"no_such_policy"});
   expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "no_such_accel"}), h, {"no_such_accel"});
   expect_trace_fails(trace(rays_path_, h, {"--accel-opt", "no_such_key=1"}), h, {"no_such_key"});
-  expect_trace_fails(trace(rays_path_, h, {"--accel-opt", "quality=extreme"}), h, {"quality", "extreme"});
+  expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "embree", "--accel-opt", "quality=extreme"}), h,
+                     {"quality", "extreme"});
   expect_trace_fails(trace(rays_path_, h, {"--accel-opt", "noequals"}), h, {"noequals"});
 }
 
@@ -721,14 +722,16 @@ TEST_F(TraceCli, SubtreeDirIsRejectedWithoutBvhNamingTheOption) {
   TempDir out;
   const std::string h = out.file("h.npy");
   const std::string tier = out.file("subtrees");
-  expect_trace_fails(trace(rays_path_, h, {"--subtree-dir", tier}), h, {"--subtree-dir", "bvh", "embree"});
+  expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "embree", "--subtree-dir", tier}), h,
+                     {"--subtree-dir", "bvh", "embree"});
   expect_trace_fails(trace(rays_path_, h, {"--reference", "--subtree-dir", tier}), h, {"--subtree-dir"});
   expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "bvh", "--subtree-dir-mb", "8"}), h,
                      {"--subtree-dir-mb needs --subtree-dir"});
   expect_trace_fails(trace(rays_path_, h, {"--brick-accel", "bvh", "--subtree-release-batch-mb", "0"}), h,
                      {"--subtree-release-batch-mb needs --subtree-dir"});
   EXPECT_FALSE(fs::exists(tier)) << "nothing created on a rejected command line";
-  const SubprocessResult serve = outcore({"serve", store_, "--listen", "127.0.0.1:0", "--subtree-dir", tier});
+  const SubprocessResult serve =
+      outcore({"serve", store_, "--listen", "127.0.0.1:0", "--brick-accel", "embree", "--subtree-dir", tier});
   EXPECT_FALSE(serve.succeeded());
   EXPECT_TRUE(contains(serve.stderr_text, "--subtree-dir needs --brick-accel bvh")) << serve.describe();
 }

@@ -53,6 +53,11 @@ class BrickBuilder {
 
 using BrickAccelOptions = std::map<std::string, std::string>;
 
+// The structure trace and serve use when none is named: the watertight bvh,
+// exact at shared edges and vertices and, since issue 23, as fast as the
+// alternatives (docs/BENCHMARKS.md, README "Which configuration").
+inline constexpr const char* kDefaultBrickAccel = "bvh";
+
 // Names: "embree" (options: robust=0|1, quality=low|medium|high); "bvh"
 // (options: triangle_test=mt|watertight|double, default watertight; bins,
 // max_leaf_size, traversal_cost, intersection_cost: BinnedSahBuilder::Config);

@@ -635,6 +635,7 @@ TEST(SubtreeTierEngine, EmbreeWithASubtreeDirectoryIsAnError) {
   const auto scene = testing::pack_test_scene({"gen:sphere?level=2"}, 100);
   testing::TempDir tier;
   EngineOptions options;
+  options.brick_accel = "embree";
   options.subtree_dir = tier.path();
   auto engine = QueryEngine::open(scene->path, options);
   ASSERT_FALSE(engine.ok());

@@ -5,6 +5,8 @@
 #include <limits>
 #include <string>
 
+#include "core/accel/bvh/wide_bvh_trace.h"
+
 namespace outcore {
 
 namespace {
@@ -52,7 +54,7 @@ Status apply_brick_structure_choices(const EngineCliOptions& cli, EngineOptions&
     }
   }
   if (cli.reference) {
-    if (cli.brick_accel != "embree" || !cli.accel_options.empty() || !cli.triangle_test.empty()) {
+    if (cli.brick_accel != kDefaultBrickAccel || !cli.accel_options.empty() || !cli.triangle_test.empty()) {
       return invalid_argument(
           "--reference chooses the brick structure itself: drop --brick-accel, --accel-opt and "
           "--triangle-test");
@@ -83,12 +85,17 @@ Status apply_engine_options(const EngineCliOptions& cli, EngineOptions& options)
                             std::to_string(cli.cache_mb));
   }
   OUTCORE_RETURN_IF_ERROR(apply_proxy_options(cli, options));
+  // The bvh bricks' SIMD path is chosen once per process; a bad
+  // OUTCORE_SIMD is an error here rather than a silent fallback later.
+  const Expected<SimdPath> simd = simd_path_from_environment();
+  if (!simd.ok()) return simd.status();
   options.cache_bytes = cli.cache_mb << 20;
   options.eviction_policy = cli.policy;
   options.brick_accel = cli.brick_accel;
-  OUTCORE_RETURN_IF_ERROR(apply_subtree_options(cli.subtree, options));
   options.accel_options = *accel_options;
-  return apply_brick_structure_choices(cli, options);
+  // --reference names the structure, which the subtree check needs.
+  OUTCORE_RETURN_IF_ERROR(apply_brick_structure_choices(cli, options));
+  return apply_subtree_options(cli.subtree, options);
 }
 
 }  // namespace outcore

@@ -26,7 +26,7 @@ namespace outcore {
 struct EngineCliOptions {
   uint64_t cache_mb = 1024;
   std::string policy = "lru";
-  std::string brick_accel = "embree";
+  std::string brick_accel = kDefaultBrickAccel;
   SubtreeCliOptions subtree;
   bool no_proxies = false;
   std::optional<int64_t> proxy_res;  // unset: the default resolution

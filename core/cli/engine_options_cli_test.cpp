@@ -59,11 +59,13 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
   cases[3].message = "--accel-opt 'novalue' is not of the form key=value";
   cases[4].cli.accel_options = {"a=1", "a=2"};
   cases[4].message = "--accel-opt 'a' given twice";
+  cases[5].cli.brick_accel = "embree";
   cases[5].cli.triangle_test = "mt";
   cases[5].message = "--triangle-test needs --brick-accel bvh (got 'embree')";
   cases[6].cli.reference = true;
-  cases[6].cli.brick_accel = "bvh";
+  cases[6].cli.brick_accel = "embree";
   cases[6].message = "--reference chooses the brick structure itself";
+  cases[7].cli.brick_accel = "embree";
   cases[7].cli.subtree.dir = "/tmp/x";
   cases[7].message = "--subtree-dir needs --brick-accel bvh (got 'embree'";
   for (const Case& c : cases) {

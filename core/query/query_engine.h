@@ -64,7 +64,7 @@ struct EngineOptions {
   // Hard budget for built bricks, in bytes.
   uint64_t cache_bytes = uint64_t{1024} << 20;
   std::string eviction_policy = "lru";
-  std::string brick_accel = "embree";
+  std::string brick_accel = kDefaultBrickAccel;
   BrickAccelOptions accel_options;
   // When set, the cache records every brick acquisition into it
   // (core/cache/access_trace.h); close it after the engine is destroyed.

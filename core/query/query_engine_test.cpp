@@ -52,10 +52,12 @@ std::vector<Ray> mixed_rays(const Aabb& box, std::size_t n, uint64_t seed) {
 }
 
 std::unique_ptr<QueryEngine> engine_for(const PackedScene& scene, uint64_t cache_bytes = uint64_t{1} << 30,
-                                        bool proxies = true) {
+                                        bool proxies = true,
+                                        const std::string& brick_accel = kDefaultBrickAccel) {
   EngineOptions options;
   options.cache_bytes = cache_bytes;
   options.proxies = proxies;
+  options.brick_accel = brick_accel;
   auto engine = QueryEngine::open(scene.path, options);
   EXPECT_TRUE(engine.ok()) << engine.status().to_string();
   return std::move(engine).value();
@@ -565,80 +567,84 @@ TEST(QueryEngine, ResidentBrickSetAnswersBitwiseAsBrickByBrick) {
       {{"gen:stadium?size=50&level=4&object=2&segments=4"}, 1500},
       {{"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5"}, 1200},
   };
-  for (const Case& c : cases) {
-    SCOPED_TRACE(c.inputs[0] + " bricks of " + std::to_string(c.brick_triangles));
-    const auto scene = pack(c.inputs, c.brick_triangles);
-    auto engine = engine_for(*scene);
-    const uint32_t bricks = engine->store().brick_count();
-    ASSERT_GT(bricks, 1u);
-    ASSERT_LE(bricks, 16u);
-    std::size_t generic = 0;
-    std::vector<Ray> rays = mixed_camera_and_in_plane_rays(scene->bounds, 3000, 77, generic);
-    rays[5].direction = {0, 0, 0};
-    rays[2999].tnear = 2.0f;
-    rays[2999].tfar = 1.0f;
-    QueryOptions walked;
-    walked.brick_set = false;
-    QueryOptions queued = walked;
-    queued.in_cache_sweep = false;
-    QueryOptions in_set;
-    in_set.brick_set_min_rays = 0;
-    QueryStats cold;
-    const std::vector<Hit> expected = intersect(*engine, rays, queued, &cold);
-    EXPECT_EQ(cold.brick_builds, bricks) << "every brick resident after the first batch";
-    // The in-plane rays graze edges on purpose: many are float/float64 edge
-    // ties, so the reference is checked on the others.
-    expect_matches_reference(*scene, std::vector<Ray>(rays.begin(), rays.begin() + generic),
-                             std::vector<Hit>(expected.begin(), expected.begin() + generic));
-    EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, walked), expected)) << "swept";
+  // Both structures that offer a set: Embree's instancing scene and the
+  // bvh bricks' own (bvh_brick_set.h).
+  for (const Case& c : cases)
+    for (const char* structure : {"embree", "bvh"}) {
+      SCOPED_TRACE(std::string(structure) + " " + c.inputs[0] + " bricks of " +
+                   std::to_string(c.brick_triangles));
+      const auto scene = pack(c.inputs, c.brick_triangles);
+      auto engine = engine_for(*scene, uint64_t{1} << 30, true, structure);
+      const uint32_t bricks = engine->store().brick_count();
+      ASSERT_GT(bricks, 1u);
+      ASSERT_LE(bricks, 16u);
+      std::size_t generic = 0;
+      std::vector<Ray> rays = mixed_camera_and_in_plane_rays(scene->bounds, 3000, 77, generic);
+      rays[5].direction = {0, 0, 0};
+      rays[2999].tnear = 2.0f;
+      rays[2999].tfar = 1.0f;
+      QueryOptions walked;
+      walked.brick_set = false;
+      QueryOptions queued = walked;
+      queued.in_cache_sweep = false;
+      QueryOptions in_set;
+      in_set.brick_set_min_rays = 0;
+      QueryStats cold;
+      const std::vector<Hit> expected = intersect(*engine, rays, queued, &cold);
+      EXPECT_EQ(cold.brick_builds, bricks) << "every brick resident after the first batch";
+      // The in-plane rays graze edges on purpose: many are float/float64 edge
+      // ties, so the reference is checked on the others.
+      expect_matches_reference(*scene, std::vector<Ray>(rays.begin(), rays.begin() + generic),
+                               std::vector<Hit>(expected.begin(), expected.begin() + generic));
+      EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, walked), expected)) << "swept";
 
-    QueryStats set_stats;
-    EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, in_set, &set_stats), expected)) << "set";
-    EXPECT_EQ(set_stats.rays_in_brick_set, rays.size() - 2);
-    EXPECT_EQ(set_stats.invalid_rays, 2u);
-    EXPECT_EQ(set_stats.brick_visits, 0u);
-    EXPECT_EQ(set_stats.brick_builds, 0u);
-    EXPECT_EQ(set_stats.brick_acquisitions, bricks);
-    EXPECT_EQ(set_stats.cache_hits, bricks);
-    uint64_t hit = 0;
-    for (const Hit& h : expected) hit += h.is_hit();
-    EXPECT_EQ(set_stats.rays_hit, hit);
-    EXPECT_GT(hit, rays.size() / 4);
-    // The default takes the set only for large batches.
-    QueryStats small;
-    intersect(*engine, rays, {}, &small);
-    EXPECT_EQ(small.rays_in_brick_set, 0u);
+      QueryStats set_stats;
+      EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, in_set, &set_stats), expected)) << "set";
+      EXPECT_EQ(set_stats.rays_in_brick_set, rays.size() - 2);
+      EXPECT_EQ(set_stats.invalid_rays, 2u);
+      EXPECT_EQ(set_stats.brick_visits, 0u);
+      EXPECT_EQ(set_stats.brick_builds, 0u);
+      EXPECT_EQ(set_stats.brick_acquisitions, bricks);
+      EXPECT_EQ(set_stats.cache_hits, bricks);
+      uint64_t hit = 0;
+      for (const Hit& h : expected) hit += h.is_hit();
+      EXPECT_EQ(set_stats.rays_hit, hit);
+      EXPECT_GT(hit, rays.size() / 4);
+      // The default takes the set only for large batches.
+      QueryStats small;
+      intersect(*engine, rays, {}, &small);
+      EXPECT_EQ(small.rays_in_brick_set, 0u);
 
-    for (const int threads : {1, 2}) {
-      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
-      EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, in_set), expected)) << threads << " threads";
+      for (const int threads : {1, 2}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        EXPECT_TRUE(bitwise_equal(intersect(*engine, rays, in_set), expected)) << threads << " threads";
+      }
+      const std::vector<Hit> unshuffled = intersect_shuffled(*engine, rays, in_set, 5);
+      EXPECT_TRUE(bitwise_equal(unshuffled, expected)) << "shuffled";
+
+      // Any hit.
+      std::vector<uint8_t> occluded_walked(rays.size()), occluded_set(rays.size(), 9);
+      QueryStats any_set;
+      ASSERT_TRUE(engine->occluded(rays, occluded_walked, queued).ok());
+      ASSERT_TRUE(engine->occluded(rays, occluded_set, in_set, &any_set).ok());
+      EXPECT_EQ(occluded_set, occluded_walked);
+      EXPECT_EQ(any_set.rays_in_brick_set, rays.size() - 2);
+      for (std::size_t i = 0; i < rays.size(); ++i)
+        EXPECT_EQ(occluded_set[i] != 0, expected[i].is_hit()) << "ray " << i;
+
+      QueryOptions strict = in_set;
+      strict.strict = true;
+      std::vector<Hit> out(rays.size());
+      const Status s = engine->intersect(rays, out, strict);
+      EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
+      EXPECT_NE(s.message().find("ray 5: direction is zero"), std::string::npos) << s.message();
+
+      // A budget of one brick: never all resident, so no set, same answers.
+      auto tight = engine_for(*scene, one_brick_budget(*engine), true, structure);
+      QueryStats tight_stats;
+      EXPECT_TRUE(bitwise_equal(intersect(*tight, rays, in_set, &tight_stats), expected)) << "one brick";
+      EXPECT_EQ(tight_stats.rays_in_brick_set, 0u);
     }
-    const std::vector<Hit> unshuffled = intersect_shuffled(*engine, rays, in_set, 5);
-    EXPECT_TRUE(bitwise_equal(unshuffled, expected)) << "shuffled";
-
-    // Any hit.
-    std::vector<uint8_t> occluded_walked(rays.size()), occluded_set(rays.size(), 9);
-    QueryStats any_set;
-    ASSERT_TRUE(engine->occluded(rays, occluded_walked, queued).ok());
-    ASSERT_TRUE(engine->occluded(rays, occluded_set, in_set, &any_set).ok());
-    EXPECT_EQ(occluded_set, occluded_walked);
-    EXPECT_EQ(any_set.rays_in_brick_set, rays.size() - 2);
-    for (std::size_t i = 0; i < rays.size(); ++i)
-      EXPECT_EQ(occluded_set[i] != 0, expected[i].is_hit()) << "ray " << i;
-
-    QueryOptions strict = in_set;
-    strict.strict = true;
-    std::vector<Hit> out(rays.size());
-    const Status s = engine->intersect(rays, out, strict);
-    EXPECT_EQ(s.code(), StatusCode::kInvalidArgument);
-    EXPECT_NE(s.message().find("ray 5: direction is zero"), std::string::npos) << s.message();
-
-    // A budget of one brick: never all resident, so no set, same answers.
-    auto tight = engine_for(*scene, one_brick_budget(*engine));
-    QueryStats tight_stats;
-    EXPECT_TRUE(bitwise_equal(intersect(*tight, rays, in_set, &tight_stats), expected)) << "one brick";
-    EXPECT_EQ(tight_stats.rays_in_brick_set, 0u);
-  }
 }
 
 TEST(QueryEngine, ConcurrentBatchesShareOneCacheAndEachGetsItsSerialAnswer) {
@@ -683,7 +689,10 @@ std::vector<uint8_t> occluded_flags(QueryEngine& engine, const std::vector<Ray>&
 TEST(QueryEngine, TraceAheadUnderATightBudgetBuildsLessAndAnswersBitwiseTheSame) {
   const auto scene = pack({"gen:city?of=(gen:sphere?level=3)&copies=40", "gen:sphere?level=4"}, 300);
   const auto rays = mixed_rays(scene->bounds, 6000, 21);
-  auto unlimited = engine_for(*scene);
+  // Embree bricks: their reservation is close to their true size, so a
+  // quarter of the reservations really forces rebuilds (bvh bricks take a
+  // fifth of what they reserve).
+  auto unlimited = engine_for(*scene, uint64_t{1} << 30, true, "embree");
   QueryStats unlimited_stats;
   const std::vector<Hit> expected = intersect(*unlimited, rays, {}, &unlimited_stats);
   const std::vector<uint8_t> expected_occluded = occluded_flags(*unlimited, rays);
@@ -701,9 +710,9 @@ TEST(QueryEngine, TraceAheadUnderATightBudgetBuildsLessAndAnswersBitwiseTheSame)
       tbb::task_arena arena(threads);
       arena.execute([&] {
         QueryStats on, off, on_any, off_any;
-        auto ahead = engine_for(*scene, quarter, proxies);
+        auto ahead = engine_for(*scene, quarter, proxies, "embree");
         EXPECT_TRUE(bitwise_equal(intersect(*ahead, rays, {}, &on), expected));
-        auto plain = engine_for(*scene, quarter, proxies);
+        auto plain = engine_for(*scene, quarter, proxies, "embree");
         EXPECT_TRUE(bitwise_equal(intersect(*plain, rays, without, &off), expected));
         EXPECT_GT(on.rays_traced_ahead, 0u);
         EXPECT_EQ(off.rays_traced_ahead, 0u);
@@ -741,6 +750,7 @@ std::unique_ptr<QueryEngine> engine_with_quality(const PackedScene& scene, uint6
                                                  const std::string& quality) {
   EngineOptions options;
   options.cache_bytes = cache_bytes;
+  options.brick_accel = "embree";
   if (!quality.empty()) options.accel_options["quality"] = quality;
   auto engine = QueryEngine::open(scene.path, options);
   EXPECT_TRUE(engine.ok()) << engine.status().to_string();

@@ -6,74 +6,10 @@
 
 #include "core/accel/brick_build_input.h"
 #include "core/accel/bvh/bvh_brick_serializer.h"
-#include "core/accel/bvh/bvh_traversal.h"
-#include "core/accel/bvh/double_triangle_test.h"
-#include "core/accel/bvh/mt_triangle_test.h"
-#include "core/accel/bvh/watertight_triangle_test.h"
+#include "core/accel/bvh/wide_bvh_collapse.h"
+#include "core/accel/bvh/wide_bvh_trace.h"
 
 namespace outcore {
-namespace {
-
-Vec3f unit_normal(const Triangle& tri) {
-  const Vec3d v0(tri.v0), v1(tri.v1), v2(tri.v2);
-  return Vec3f(normalize(cross(v1 - v0, v2 - v0)));
-}
-
-// Reorders a and b in place so that new position j holds old position
-// order[j], following the permutation's cycles (no second copy of the
-// arrays); order is consumed.
-template <class A, class B>
-void permute_in_place(std::vector<uint32_t>& order, std::vector<A>& a, std::vector<B>& b) {
-  for (uint32_t start = 0; start < order.size(); ++start) {
-    if (order[start] == start) continue;
-    const A held_a = a[start];
-    const B held_b = b[start];
-    uint32_t j = start;
-    while (true) {
-      const uint32_t from = order[j];
-      order[j] = j;
-      if (from == start) {
-        a[j] = held_a;
-        b[j] = held_b;
-        break;
-      }
-      a[j] = a[from];
-      b[j] = b[from];
-      j = from;
-    }
-  }
-}
-
-template <class Test>
-void intersect_all(const BvhTreeView& tree, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
-  for (const uint32_t i : ray_ids) bvh_closest_hit<Test>(tree, rays[i], hits[i]);
-}
-
-template <class Test>
-void occluded_all(const BvhTreeView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
-                  uint8_t* occluded) {
-  for (const uint32_t i : ray_ids) {
-    if (occluded[i] == 0 && bvh_any_hit<Test>(tree, rays[i])) occluded[i] = 1;
-  }
-}
-
-}  // namespace
-
-std::string_view triangle_test_name(TriangleTest test) {
-  switch (test) {
-    case TriangleTest::kMt: return MtTriangleTest::kName;
-    case TriangleTest::kWatertight: return WatertightTriangleTest::kName;
-    case TriangleTest::kDouble: return DoubleTriangleTest::kName;
-  }
-  return "?";
-}
-
-std::optional<TriangleTest> triangle_test_from_name(std::string_view name) {
-  for (const TriangleTest test : kAllTriangleTests) {
-    if (name == triangle_test_name(test)) return test;
-  }
-  return std::nullopt;
-}
 
 Expected<std::unique_ptr<BvhBrickAccel>> BvhBrickAccel::build(BrickData&& brick,
                                                               const BvhBrickConfig& config) {
@@ -88,35 +24,38 @@ Expected<std::unique_ptr<BvhBrickAccel>> BvhBrickAccel::build(BrickData&& brick,
   accel->test_ = config.triangle_test;
   accel->brick_id_ = brick.brick_id;
   accel->triangle_count_ = static_cast<uint32_t>(n);
-  BvhTree& tree = accel->tree_;
 
-  // The triangles that can be hit, with their hit records, in input order.
-  const auto usable = [](const Triangle& tri) { return tri.is_finite() && !tri.is_degenerate(); };
-  const uint64_t kept = std::count_if(brick.triangles.begin(), brick.triangles.end(), usable);
-  tree.triangles.reserve(kept);
-  tree.records.reserve(kept);
+  // Only the triangles that can be hit, in input order, compacted in place.
+  uint64_t kept = 0;
   for (uint64_t k = 0; k < n; ++k) {
     const Triangle& tri = brick.triangles[k];
-    if (!usable(tri)) continue;
-    tree.triangles.push_back(tri);
-    tree.records.push_back({unit_normal(tri), brick.ids[k].geometry_id, brick.ids[k].primitive_id});
+    if (!tri.is_finite() || tri.is_degenerate()) continue;
+    brick.triangles[kept] = tri;
+    brick.ids[kept] = brick.ids[k];
+    ++kept;
   }
-  uint64_t peak = brick.memory_bytes() + tree.memory_bytes();
+  brick.triangles.resize(kept);
+  brick.ids.resize(kept);
+  const uint64_t input_bytes = brick.memory_bytes();
+
+  BinnedSahBuilder::Result binary = BinnedSahBuilder::build(brick.triangles, config.builder);
+  const uint64_t binary_bytes =
+      binary.nodes.capacity() * sizeof(BvhNode) + binary.order.capacity() * sizeof(uint32_t);
+  WideBvhCollapser::Result wide =
+      WideBvhCollapser::collapse(binary.nodes, binary.order, brick.triangles, brick.ids);
+  const uint64_t peak = input_bytes + std::max(binary.peak_bytes, binary_bytes + wide.peak_bytes);
   brick.triangles = {};
   brick.ids = {};
 
-  BinnedSahBuilder::Result built = BinnedSahBuilder::build(tree.triangles, config.builder);
-  peak = std::max(peak, tree.memory_bytes() + built.peak_bytes);
-  tree.nodes = std::move(built.nodes);
-  permute_in_place(built.order, tree.triangles, tree.records);
-  accel->view_ = tree.view();
-  accel->memory_bytes_ = tree.memory_bytes() + kOverheadBytes;
+  accel->tree_ = std::move(wide.tree);
+  accel->view_ = accel->tree_.view();
+  accel->memory_bytes_ = accel->tree_.memory_bytes() + kOverheadBytes;
   accel->build_peak_bytes_ = peak + kOverheadBytes;
   accel->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return accel;
 }
 
-std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id,
+std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_tree(WideBvh tree, TriangleTest test, uint32_t brick_id,
                                                         uint32_t triangle_count) {
   std::unique_ptr<BvhBrickAccel> accel(new BvhBrickAccel());
   accel->tree_ = std::move(tree);
@@ -129,15 +68,14 @@ std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_tree(BvhTree tree, TriangleTe
   return accel;
 }
 
-std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_view(const BvhTreeView& view,
+std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_view(const WideBvhView& view,
                                                         std::shared_ptr<const void> owner, TriangleTest test,
                                                         uint32_t brick_id, uint32_t triangle_count) {
   std::unique_ptr<BvhBrickAccel> accel(new BvhBrickAccel());
   accel->owner_ = std::move(owner);
   accel->view_ = view;
   // As a build of the same tree reports (its arrays are exactly sized).
-  accel->memory_bytes_ =
-      view.nodes.size_bytes() + view.triangles.size_bytes() + view.records.size_bytes() + kOverheadBytes;
+  accel->memory_bytes_ = view.nodes.size_bytes() + view.packets.size_bytes() + kOverheadBytes;
   accel->test_ = test;
   accel->brick_id_ = brick_id;
   accel->triangle_count_ = triangle_count;
@@ -145,38 +83,25 @@ std::unique_ptr<BvhBrickAccel> BvhBrickAccel::from_view(const BvhTreeView& view,
   return accel;
 }
 
-// reserve_bytes(n) = the builder's scratch + kOverheadBytes + 200 n. The
-// peak is the larger of (a) the input brick (44 B/tri) plus the tree's
-// triangles and records (56 B/tri), and (b) those 56 B/tri plus the builder's
-// peak: centroids and order (16 B/tri) and nodes reserved for a full binary
-// tree, then copied to their exact size (at most 2 x 64 B/tri). So (b) <=
-// 200 B/tri always, and (a) too while the brick's vectors hold no more than
-// about 3 times their size in spare capacity (the store loads them exact).
-// After the build, memory_bytes() is 56 B/tri plus 32 B per node: about 92
-// B/tri on the bunny with the default config (tested).
+// reserve_bytes(n) bounds the build's peak, which is the input brick (44
+// B/tri, compacted in place, exact from the store) plus the larger of the
+// binary builder's peak and, while collapsing, the binary nodes and order
+// (at most 2n - 1 nodes and n indices) plus the collapser's peak (the wide
+// tree and its scratch). It also bounds memory_bytes() after the build:
+// about 50 B/tri on the bunny with the default config (tested).
 uint64_t BvhBrickAccel::reserve_bytes(uint64_t triangle_count) {
-  return BinnedSahBuilder::peak_bytes_bound(0) + kOverheadBytes +
-         triangle_count * (sizeof(Triangle) + sizeof(BvhHitRecord) + sizeof(Vec3f) + sizeof(uint32_t) +
-                           4 * sizeof(BvhNode));
+  const uint64_t n = triangle_count;
+  const uint64_t binary_kept = 2 * n * sizeof(BvhNode) + n * sizeof(uint32_t);
+  return kOverheadBytes + n * (sizeof(Triangle) + sizeof(TriangleId)) +
+         std::max(BinnedSahBuilder::peak_bytes_bound(n), binary_kept + WideBvhCollapser::peak_bytes_bound(n));
 }
 
 void BvhBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
-  if (view_.nodes.empty()) return;
-  switch (test_) {
-    case TriangleTest::kMt: return intersect_all<MtTriangleTest>(view_, ray_ids, rays, hits);
-    case TriangleTest::kWatertight: return intersect_all<WatertightTriangleTest>(view_, ray_ids, rays, hits);
-    case TriangleTest::kDouble: return intersect_all<DoubleTriangleTest>(view_, ray_ids, rays, hits);
-  }
+  wide_bvh_intersect(active_simd_path(), test_, view_, ray_ids, rays, hits);
 }
 
 void BvhBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
-  if (view_.nodes.empty()) return;
-  switch (test_) {
-    case TriangleTest::kMt: return occluded_all<MtTriangleTest>(view_, ray_ids, rays, occluded);
-    case TriangleTest::kWatertight:
-      return occluded_all<WatertightTriangleTest>(view_, ray_ids, rays, occluded);
-    case TriangleTest::kDouble: return occluded_all<DoubleTriangleTest>(view_, ray_ids, rays, occluded);
-  }
+  wide_bvh_occluded(active_simd_path(), test_, view_, ray_ids, rays, occluded);
 }
 
 BvhBrickBuilder::BvhBrickBuilder(const BvhBrickConfig& config)

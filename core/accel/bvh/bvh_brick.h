@@ -1,5 +1,7 @@
-// BvhBrickAccel: a brick's triangles in our own binned-SAH BVH (bvh_tree.h),
-// traced with the triangle test chosen by name (TriangleTest), and
+// BvhBrickAccel: a brick's triangles in our own BVH — built binary by binned
+// SAH (binned_sah_builder.h), collapsed to 8-wide nodes and packets of 8
+// triangles (wide_bvh_collapse.h) — traced with the triangle test chosen by
+// name (TriangleTest) on the SIMD path of the CPU (wide_bvh_trace.h), and
 // BvhBrickBuilder, the BrickBuilder that makes them (registered as "bvh" in
 // brick_accel_factory.cpp).
 //
@@ -11,14 +13,16 @@
 // (hit_is_better). Triangles that are degenerate in float64 (or not finite)
 // are left out: the float64 reference never hits them.
 //
-// The test is selected once per brick call (one switch), then a loop over the
-// rays calls the traversal templated on it: no per-ray dispatch.
+// The test and the SIMD path are selected once per brick call (one switch),
+// then a loop over the rays calls the traversal templated on them: no
+// per-ray dispatch.
 //
-// Memory: memory_bytes() = the tree's arrays (32 B per node, 56 B per
-// triangle) + kOverheadBytes, whether the accel owns them (a build) or reads
-// them in place from a loaded subtree file (from_view(); kOverheadBytes also
-// covers such a file's header, padding, trailer and last partial page).
-// reserve_bytes(n) bounds it and the build peak (see bvh_brick.cpp).
+// Memory: memory_bytes() = the tree's arrays (256 B per wide node, 352 B per
+// packet of 8 triangles, about 50 B per triangle in all) + kOverheadBytes,
+// whether the accel owns them (a build) or reads them in place from a loaded
+// subtree file (from_view(); kOverheadBytes also covers such a file's header,
+// padding, trailer and last partial page). reserve_bytes(n) bounds it and
+// the build peak (see bvh_brick.cpp).
 //
 // Thread-safety: build() may run on many threads at once; a built accel is
 // immutable and intersect() / occluded() may run concurrently.
@@ -33,17 +37,11 @@
 
 #include "core/accel/brick_accel_factory.h"
 #include "core/accel/bvh/binned_sah_builder.h"
-#include "core/accel/bvh/bvh_tree.h"
+#include "core/accel/bvh/triangle_test_kind.h"
+#include "core/accel/bvh/wide_bvh.h"
 #include "core/store/brick_data.h"
 
 namespace outcore {
-
-enum class TriangleTest { kMt, kWatertight, kDouble };
-inline constexpr TriangleTest kAllTriangleTests[] = {TriangleTest::kMt, TriangleTest::kWatertight,
-                                                     TriangleTest::kDouble};
-
-std::string_view triangle_test_name(TriangleTest test);
-std::optional<TriangleTest> triangle_test_from_name(std::string_view name);
 
 struct BvhBrickConfig {
   // Default watertight: zero leaks through shared edges and vertices (the
@@ -66,11 +64,11 @@ class BvhBrickAccel final : public BrickAccel {
   // A brick from a tree it owns; the tree must be valid (validate()).
   // triangle_count: the source brick's, degenerate triangles included (the
   // tree holds only the usable ones).
-  static std::unique_ptr<BvhBrickAccel> from_tree(BvhTree tree, TriangleTest test, uint32_t brick_id,
+  static std::unique_ptr<BvhBrickAccel> from_tree(WideBvh tree, TriangleTest test, uint32_t brick_id,
                                                   uint32_t triangle_count);
   // A brick that reads a valid view in place; `owner` keeps the viewed bytes
   // alive (e.g. a subtree file's copy) for as long as the accel lives.
-  static std::unique_ptr<BvhBrickAccel> from_view(const BvhTreeView& view, std::shared_ptr<const void> owner,
+  static std::unique_ptr<BvhBrickAccel> from_view(const WideBvhView& view, std::shared_ptr<const void> owner,
                                                   TriangleTest test, uint32_t brick_id,
                                                   uint32_t triangle_count);
   // Upper bound on memory_bytes() and build_peak_bytes() for n triangles.
@@ -84,7 +82,7 @@ class BvhBrickAccel final : public BrickAccel {
   uint32_t triangle_count() const override { return triangle_count_; }
 
   // Beyond BrickAccel (statistics and tests):
-  const BvhTreeView& view() const { return view_; }
+  const WideBvhView& view() const { return view_; }
   // Whether the arrays are read in place from bytes someone else owns.
   bool in_place() const { return owner_ != nullptr; }
   TriangleTest triangle_test() const { return test_; }
@@ -94,9 +92,9 @@ class BvhBrickAccel final : public BrickAccel {
  private:
   BvhBrickAccel() = default;
 
-  BvhTree tree_;                       // empty when in place
+  WideBvh tree_;                       // empty when in place
   std::shared_ptr<const void> owner_;  // of the bytes view_ reads, when in place
-  BvhTreeView view_;
+  WideBvhView view_;
   uint64_t memory_bytes_ = kOverheadBytes;
   TriangleTest test_ = TriangleTest::kWatertight;
   uint32_t brick_id_ = 0;
@@ -121,6 +119,10 @@ class BvhBrickBuilder final : public BrickBuilder {
   double hit_rounding_scale() const override {
     return config_.triangle_test == TriangleTest::kMt ? kMollerTrumboreHitRounding : kWatertightHitRounding;
   }
+  // The resident bricks as one structure (BvhBrickSet; defined in bvh_brick_set.cpp).
+  bool offers_resident_set() const override { return true; }
+  Expected<std::unique_ptr<ResidentBrickSet>> make_resident_set(
+      std::span<const BrickAccel* const> bricks) const override;
   const BvhBrickConfig& config() const { return config_; }
 
  private:

@@ -21,14 +21,13 @@ uint64_t align_up(uint64_t offset) {
 
 // Where each array starts and where the payload ends, from the counts.
 struct PayloadLayout {
-  uint64_t nodes, triangles, records, end;
+  uint64_t nodes, packets, end;
 
-  static PayloadLayout of(uint64_t node_count, uint64_t triangle_count, uint64_t record_count) {
+  static PayloadLayout of(uint64_t node_count, uint64_t packet_count) {
     PayloadLayout layout;
     layout.nodes = kHeaderBytes;
-    layout.triangles = align_up(layout.nodes + node_count * sizeof(BvhNode));
-    layout.records = align_up(layout.triangles + triangle_count * sizeof(Triangle));
-    layout.end = layout.records + record_count * sizeof(BvhHitRecord);
+    layout.packets = align_up(layout.nodes + node_count * sizeof(WideBvhNode));
+    layout.end = layout.packets + packet_count * sizeof(TrianglePacket);
     return layout;
   }
 };
@@ -73,21 +72,17 @@ Status BvhBrickSerializer::save(const BrickAccel& accel, std::ostream& out) cons
                             " uses triangle test " + std::string(triangle_test_name(bvh->triangle_test())) +
                             ", not " + std::string(triangle_test_name(config_.triangle_test)));
   }
-  const BvhTreeView& tree = bvh->view();
-  const PayloadLayout layout =
-      PayloadLayout::of(tree.nodes.size(), tree.triangles.size(), tree.records.size());
+  const WideBvhView& tree = bvh->view();
+  const PayloadLayout layout = PayloadLayout::of(tree.nodes.size(), tree.packets.size());
   try {
     cereal::BinaryOutputArchive archive(out);
     archive(static_cast<uint8_t>(bvh->triangle_test()));
     write_zeros(archive, 7);
-    archive(static_cast<uint64_t>(tree.nodes.size()), static_cast<uint64_t>(tree.triangles.size()),
-            static_cast<uint64_t>(tree.records.size()));
-    write_zeros(archive, kHeaderBytes - 32);
+    archive(static_cast<uint64_t>(tree.nodes.size()), static_cast<uint64_t>(tree.packets.size()));
+    write_zeros(archive, kHeaderBytes - 24);
     archive(cereal::binary_data(tree.nodes.data(), tree.nodes.size_bytes()));
-    write_zeros(archive, layout.triangles - (layout.nodes + tree.nodes.size_bytes()));
-    archive(cereal::binary_data(tree.triangles.data(), tree.triangles.size_bytes()));
-    write_zeros(archive, layout.records - (layout.triangles + tree.triangles.size_bytes()));
-    archive(cereal::binary_data(tree.records.data(), tree.records.size_bytes()));
+    write_zeros(archive, layout.packets - (layout.nodes + tree.nodes.size_bytes()));
+    archive(cereal::binary_data(tree.packets.data(), tree.packets.size_bytes()));
   } catch (const std::exception& e) {
     return io_error(std::string("bvh serialiser: ") + e.what());
   }
@@ -104,14 +99,14 @@ Expected<std::unique_ptr<BrickAccel>> BvhBrickSerializer::load(const SerializedB
     return invalid_argument(what + ": truncated (" + std::to_string(bytes.size()) + " bytes, no header)");
   }
   const uint8_t test = static_cast<uint8_t>(bytes[0]);
-  uint64_t counts[3];
+  uint64_t counts[2];
   std::memcpy(counts, bytes.data() + 8, sizeof(counts));
   for (const uint64_t count : counts) {
     if (count > kMaxArrayElements) {
       return invalid_argument(what + ": an array of " + std::to_string(count) + " elements");
     }
   }
-  const PayloadLayout layout = PayloadLayout::of(counts[0], counts[1], counts[2]);
+  const PayloadLayout layout = PayloadLayout::of(counts[0], counts[1]);
   if (layout.end > bytes.size()) {
     return invalid_argument(what + ": truncated (" + std::to_string(bytes.size()) +
                             " bytes, the tree needs " + std::to_string(layout.end) + ")");
@@ -124,26 +119,25 @@ Expected<std::unique_ptr<BrickAccel>> BvhBrickSerializer::load(const SerializedB
     return invalid_argument(what + ": triangle test " + std::to_string(test) + ", expected " +
                             std::string(triangle_test_name(config_.triangle_test)));
   }
-  if (counts[1] > triangle_count) {
-    return invalid_argument(what + ": " + std::to_string(counts[1]) + " triangles, more than the " +
-                            std::to_string(triangle_count) + " of the brick");
+  // Slots: the triangles plus at most a quarter of padding, plus a packet.
+  const uint64_t max_packets = (uint64_t{triangle_count} + triangle_count / 4 + 8) / kPacketLanes + 2;
+  if (counts[1] > max_packets) {
+    return invalid_argument(what + ": " + std::to_string(counts[1]) + " triangle packets, more than the " +
+                            std::to_string(triangle_count) + " triangles of the brick can fill");
   }
   const bool in_place =
       payload.owner != nullptr && reinterpret_cast<uintptr_t>(bytes.data()) % kInPlaceAlignment == 0;
-  BvhTree copy;
-  BvhTreeView view;
+  WideBvh copy;
+  WideBvhView view;
   if (in_place) {
-    view = {array_at<BvhNode>(bytes, layout.nodes, counts[0]),
-            array_at<Triangle>(bytes, layout.triangles, counts[1]),
-            array_at<BvhHitRecord>(bytes, layout.records, counts[2])};
+    view = {array_at<WideBvhNode>(bytes, layout.nodes, counts[0]),
+            array_at<TrianglePacket>(bytes, layout.packets, counts[1])};
   } else {
     // Unaligned or short-lived bytes: the accel gets its own copy.
     copy.nodes.resize(counts[0]);
-    copy.triangles.resize(counts[1]);
-    copy.records.resize(counts[2]);
+    copy.packets.resize(counts[1]);
     copy_array(copy.nodes, bytes, layout.nodes);
-    copy_array(copy.triangles, bytes, layout.triangles);
-    copy_array(copy.records, bytes, layout.records);
+    copy_array(copy.packets, bytes, layout.packets);
     view = copy.view();
   }
   if (!payload.known_good) {

@@ -1,13 +1,12 @@
 // BvhBrickSerializer: the subtree tier's serialiser for "bvh" bricks
-// (brick_serializer.h). The payload (version 2) is laid out so that a mapped
+// (brick_serializer.h). The payload (version 3) is laid out so that a mapped
 // file can be traversed in place, without copying or parsing the arrays:
 //
 //   offset 0   triangle test (uint8), 7 zero bytes
-//   offset 8   node count, triangle count, record count (uint64 each)
-//   offset 32  32 zero bytes
-//   offset 64  the nodes (32 B each), zero padding to a multiple of 64,
-//              the triangles (36 B each), zero padding to a multiple of 64,
-//              the hit records (20 B each); nothing after them
+//   offset 8   node count, packet count (uint64 each)
+//   offset 24  40 zero bytes
+//   offset 64  the wide nodes (256 B each), then the triangle packets (352 B
+//              each, starting on a multiple of 64); nothing after them
 //
 // written with cereal's binary archive (little-endian, as the store). load()
 // uses the arrays in place when the payload starts on a 64-byte boundary and
@@ -33,7 +32,7 @@ class BvhBrickSerializer final : public BrickSerializer {
  public:
   // Bump when the payload layout or the builder's output for a given config
   // changes, so older tier entries are never used.
-  static constexpr int kPayloadVersion = 2;
+  static constexpr int kPayloadVersion = 3;
   // Where the payload must start for load() to use it in place.
   static constexpr std::size_t kInPlaceAlignment = 64;
 

@@ -148,7 +148,8 @@ TEST(BvhBrickSerializer, MalformedPayloadsAreErrorsNotCrashes) {
         << "cut at " << cut;
   }
   EXPECT_FALSE(serializer.load(unowned(payload + "x"), 0, n).ok()) << "trailing bytes";
-  EXPECT_FALSE(serializer.load(unowned(payload), 0, n - 1).ok()) << "more triangles than the brick has";
+  EXPECT_FALSE(serializer.load(unowned(payload), 0, n / 2).ok())
+      << "more packets than the brick's triangles fill";
   std::string huge = payload;
   const uint64_t claimed = uint64_t{1} << 31;  // a node count far beyond the input
   std::memcpy(huge.data() + 8, &claimed, sizeof(claimed));
@@ -164,9 +165,11 @@ TEST(BvhBrickSerializer, MalformedPayloadsAreErrorsNotCrashes) {
   EXPECT_FALSE(serializer.save(*build(brick, config_of(TriangleTest::kMt)), out).ok());
   // A structurally broken tree behind a well-formed archive.
   std::string broken = payload;
-  const std::size_t root_index = 64 + offsetof(BvhNode, index);  // the 64-byte header, then nodes[0]
-  const uint32_t self = 0;
-  std::memcpy(broken.data() + root_index, &self, sizeof(self));
+  // The 64-byte header, then nodes[0]: every child made an inner node that is the root itself.
+  const uint32_t self[kWideBvhWidth] = {};
+  std::memcpy(broken.data() + 64 + offsetof(WideBvhNode, child), self, sizeof(self));
+  broken[64 + offsetof(WideBvhNode, inner_mask)] = static_cast<char>(0xff);
+  broken[64 + offsetof(WideBvhNode, leaf_mask)] = 0;
   EXPECT_FALSE(serializer.load(unowned(broken), 0, n).ok());
   // In place too, unless the caller vouches for the bytes.
   const auto owned = aligned_copy(broken);

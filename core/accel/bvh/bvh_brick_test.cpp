@@ -255,7 +255,7 @@ TEST(BvhBrick, AnInPlaceViewOfTheTreeGivesIdenticalAnswers) {
   const auto rays = test_rays(brick, 1000, 8);
   for (const TriangleTest test : kAllTests) {
     const auto accel = build(brick, test);
-    auto owner = std::make_shared<const BvhTree>(BvhTree::copy_of(accel->view()));
+    auto owner = std::make_shared<const WideBvh>(WideBvh::copy_of(accel->view()));
     const auto loaded = BvhBrickAccel::from_view(owner->view(), owner, test, 0, accel->triangle_count());
     EXPECT_TRUE(loaded->in_place());
     EXPECT_FALSE(accel->in_place());
@@ -272,43 +272,64 @@ TEST(BvhBrick, AnInPlaceViewOfTheTreeGivesIdenticalAnswers) {
 }
 
 TEST(BvhBrick, ValidateRejectsStructurallyBrokenTrees) {
-  const auto accel = build(load_brick_from("gen:sphere?level=2"), TriangleTest::kWatertight);
-  EXPECT_TRUE(accel->view().validate().ok());
-  BvhTree bad = BvhTree::copy_of(accel->view());
-  bad.nodes[0].index = 0;  // the root its own child
-  EXPECT_FALSE(bad.view().validate().ok());
-  bad = BvhTree::copy_of(accel->view());
-  bad.nodes.back().count = 1000000;  // a leaf past the triangles
-  const Status leaf = bad.view().validate();
-  ASSERT_FALSE(leaf.ok());
-  EXPECT_NE(leaf.message().find("leaf"), std::string::npos) << leaf.message();
-  bad = BvhTree::copy_of(accel->view());
-  bad.records.pop_back();
-  EXPECT_FALSE(bad.view().validate().ok());
-  bad = BvhTree::copy_of(accel->view());
-  bad.nodes.resize(1);  // the root's children out of range
-  EXPECT_FALSE(bad.view().validate().ok());
-  // A chain of `pairs` levels below the root (node 1 + 2p inner but the
-  // last, node 2 + 2p a leaf): its deepest nodes are at depth pairs + 1.
-  const auto chain = [](uint32_t pairs) {
-    BvhTree tree;
-    uint32_t triangle = 0;
-    const auto leaf = [&] { return BvhNode{{}, triangle++, 1}; };
-    tree.nodes.push_back(BvhNode{{}, 1, 0});
-    for (uint32_t p = 0; p < pairs; ++p) {
-      tree.nodes.push_back(p + 1 == pairs ? leaf() : BvhNode{{}, 1 + 2 * p + 2, 0});
-      tree.nodes.push_back(leaf());
+  const auto accel = build(load_brick_from("gen:sphere?level=3"), TriangleTest::kWatertight);
+  ASSERT_TRUE(accel->view().validate().ok());
+  ASSERT_GT(accel->view().nodes.size(), 1u);
+  const WideBvh good = WideBvh::copy_of(accel->view());
+  const int inner = __builtin_ctz(good.nodes[0].inner_mask);
+  const int leaf_node = [&] {
+    for (std::size_t k = 0; k < good.nodes.size(); ++k) {
+      if (good.nodes[k].leaf_mask != 0) return static_cast<int>(k);
     }
-    tree.triangles.resize(triangle);
-    tree.records.resize(triangle);
+    return -1;
+  }();
+  ASSERT_GE(leaf_node, 0);
+  const int leaf = __builtin_ctz(good.nodes[leaf_node].leaf_mask);
+  const auto rejects = [](const WideBvh& bad, const std::string& word) {
+    const Status status = bad.view().validate();
+    ASSERT_FALSE(status.ok()) << word;
+    EXPECT_NE(status.message().find(word), std::string::npos) << status.message();
+  };
+  WideBvh bad = good;
+  bad.nodes[0].child[inner] = 0;  // the root its own child
+  rejects(bad, "out of range");
+  bad = good;
+  bad.nodes[leaf_node].leaf_triangles[leaf] = 255;
+  bad.nodes[leaf_node].child[leaf] = static_cast<uint32_t>(bad.view().slot_count() - 3);  // past the slots
+  rejects(bad, "leaf");
+  bad = good;
+  bad.nodes[leaf_node].leaf_triangles[leaf] = 0;  // a leaf of no triangles
+  rejects(bad, "leaf");
+  bad = good;
+  bad.nodes[0].leaf_mask |= bad.nodes[0].inner_mask;  // a child both inner and leaf
+  rejects(bad, "masks");
+  bad = good;
+  bad.nodes.resize(1);  // the root's children out of range
+  rejects(bad, "out of range");
+  bad = good;
+  bad.packets.clear();
+  rejects(bad, "leaf");
+  // A chain of `levels` nodes, each with the next as its inner child and
+  // one leaf: the deepest is at depth `levels`.
+  const auto chain = [](uint32_t levels) {
+    WideBvh tree;
+    tree.nodes.resize(levels);
+    for (uint32_t k = 0; k < levels; ++k) {
+      WideBvhNode& node = tree.nodes[k];
+      node.child[0] = k;
+      node.leaf_triangles[0] = 1;
+      node.leaf_mask = 1;
+      if (k + 1 < levels) {
+        node.child[1] = k + 1;
+        node.inner_mask = 2;
+      }
+    }
+    tree.packets.resize((levels + kPacketLanes - 1) / kPacketLanes);
     return tree;
   };
-  const BvhTree deepest_allowed = chain(kMaxBvhDepth - 1);
+  const WideBvh deepest_allowed = chain(kMaxBvhDepth);
   EXPECT_TRUE(deepest_allowed.view().validate().ok()) << deepest_allowed.view().validate().to_string();
-  const BvhTree deep = chain(kMaxBvhDepth);
-  const Status too_deep = deep.view().validate();
-  ASSERT_FALSE(too_deep.ok());
-  EXPECT_NE(too_deep.message().find("deeper"), std::string::npos) << too_deep.message();
+  rejects(chain(kMaxBvhDepth + 1), "deeper");
 }
 
 TEST(BvhBrick, ReserveBytesBoundsMemoryAndBuildPeak) {

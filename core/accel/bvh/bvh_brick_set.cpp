@@ -1,0 +1,85 @@
+#include "core/accel/bvh/bvh_brick_set.h"
+
+#include <algorithm>
+#include <limits>
+#include <string>
+
+#include "core/accel/bvh/wide_bvh_trace.h"
+
+namespace outcore {
+namespace {
+
+// The union of a tree's root children's boxes: the tree's bounds.
+Aabb tree_bounds(const WideBvhView& tree) {
+  Aabb box;
+  const WideBvhNode& root = tree.nodes[0];
+  for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
+    if ((root.child_mask() >> k & 1) == 0) continue;
+    box.extend(
+        Aabb{{root.lo[0][k], root.lo[1][k], root.lo[2][k]}, {root.hi[0][k], root.hi[1][k], root.hi[2][k]}});
+  }
+  return box;
+}
+
+}  // namespace
+
+Expected<std::unique_ptr<BvhBrickSet>> BvhBrickSet::build(std::span<const BvhBrickAccel* const> bricks) {
+  std::unique_ptr<BvhBrickSet> set(new BvhBrickSet());
+  bool first = true;
+  for (const BvhBrickAccel* brick : bricks) {
+    if (first) set->test_ = brick->triangle_test();
+    first = false;
+    if (brick->triangle_test() != set->test_) {
+      return invalid_argument("bvh brick set: brick " + std::to_string(brick->brick_id()) +
+                              " uses triangle test " +
+                              std::string(triangle_test_name(brick->triangle_test())) + ", the set " +
+                              std::string(triangle_test_name(set->test_)));
+    }
+    if (brick->view().nodes.empty()) continue;
+    if (set->trees_.size() == kMaxWideBvhSetTrees) {
+      return invalid_argument("bvh brick set: more than " + std::to_string(kMaxWideBvhSetTrees) +
+                              " bricks with triangles");
+    }
+    set->trees_.push_back(brick->view());
+  }
+  const std::size_t rows = (set->trees_.size() + kWideBvhWidth - 1) / kWideBvhWidth;
+  set->boxes_.resize(rows);
+  for (WideBvhNode& node : set->boxes_) {
+    for (int axis = 0; axis < 3; ++axis) {
+      std::fill(std::begin(node.lo[axis]), std::end(node.lo[axis]), std::numeric_limits<float>::infinity());
+      std::fill(std::begin(node.hi[axis]), std::end(node.hi[axis]), -std::numeric_limits<float>::infinity());
+    }
+  }
+  for (std::size_t t = 0; t < set->trees_.size(); ++t) {
+    WideBvhNode& node = set->boxes_[t / kWideBvhWidth];
+    const uint32_t k = static_cast<uint32_t>(t % kWideBvhWidth);
+    const Aabb box = tree_bounds(set->trees_[t]);
+    for (int axis = 0; axis < 3; ++axis) {
+      node.lo[axis][k] = box.lo[axis];
+      node.hi[axis][k] = box.hi[axis];
+    }
+    node.child[k] = static_cast<uint32_t>(t);
+    node.leaf_triangles[k] = 1;
+    node.leaf_mask |= static_cast<uint8_t>(1u << k);
+  }
+  return set;
+}
+
+void BvhBrickSet::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
+  wide_bvh_set_intersect(active_simd_path(), test_, {trees_, boxes_}, ray_ids, rays, hits);
+}
+
+void BvhBrickSet::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
+  wide_bvh_set_occluded(active_simd_path(), test_, {trees_, boxes_}, ray_ids, rays, occluded);
+}
+
+Expected<std::unique_ptr<ResidentBrickSet>> BvhBrickBuilder::make_resident_set(
+    std::span<const BrickAccel* const> bricks) const {
+  // Every brick of this builder is a BvhBrickAccel.
+  std::vector<const BvhBrickAccel*> accels(bricks.size());
+  for (std::size_t b = 0; b < bricks.size(); ++b) accels[b] = static_cast<const BvhBrickAccel*>(bricks[b]);
+  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<BvhBrickSet> set, BvhBrickSet::build(accels));
+  return std::unique_ptr<ResidentBrickSet>(std::move(set));
+}
+
+}  // namespace outcore
