@@ -35,6 +35,7 @@ struct SimdLanes4 {
   static F min(F a, F b) { return _mm_min_ps(a, b); }
   static F max(F a, F b) { return _mm_max_ps(a, b); }
   static F bit_and(F a, F b) { return _mm_and_ps(a, b); }
+  static F blend(F a, F b, F mask) { return _mm_blendv_ps(a, b, mask); }  // mask ? b : a
   static F bit_or(F a, F b) { return _mm_or_ps(a, b); }
   static F lt(F a, F b) { return _mm_cmplt_ps(a, b); }
   static F le(F a, F b) { return _mm_cmple_ps(a, b); }
@@ -61,6 +62,7 @@ struct SimdLanes8 {
   OUTCORE_AVX2 F min(F a, F b) { return _mm256_min_ps(a, b); }
   OUTCORE_AVX2 F max(F a, F b) { return _mm256_max_ps(a, b); }
   OUTCORE_AVX2 F bit_and(F a, F b) { return _mm256_and_ps(a, b); }
+  OUTCORE_AVX2 F blend(F a, F b, F mask) { return _mm256_blendv_ps(a, b, mask); }  // mask ? b : a
   OUTCORE_AVX2 F bit_or(F a, F b) { return _mm256_or_ps(a, b); }
   OUTCORE_AVX2 F lt(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_LT_OQ); }
   OUTCORE_AVX2 F le(F a, F b) { return _mm256_cmp_ps(a, b, _CMP_LE_OQ); }

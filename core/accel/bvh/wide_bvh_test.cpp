@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <random>
 #include <string>
@@ -195,6 +196,47 @@ TEST(WideBvh, EveryPathMatchesTheScalarReferenceOnAimedAndAxisRays) {
   const BrickData terrain = load_brick_from("gen:terrain?n=16&size=4&height=0");
   const std::vector<Ray> rays = aimed_rays(terrain, bounds_of(terrain).center() + Vec3f(0.01f, 1, 1));
   expect_paths_match_reference("flat terrain", build_trees(terrain), rays, rays.size() / 4);
+}
+
+// A pinhole camera's rays in pixel order (one origin, directions that vary
+// smoothly): the runs the packet walk takes, with a few rays that break a
+// run (another origin, a shorter tfar, a tnear, a zero component).
+std::vector<Ray> camera_rays(const BrickData& brick, uint32_t side, const Vec3f& eye_offset) {
+  const Aabb b = bounds_of(brick);
+  const Vec3f eye = b.center() + eye_offset;
+  std::vector<Ray> rays;
+  for (uint32_t y = 0; y < side; ++y) {
+    for (uint32_t x = 0; x < side; ++x) {
+      const float fx = (static_cast<float>(x) + 0.5f) / static_cast<float>(side);
+      const float fy = (static_cast<float>(y) + 0.5f) / static_cast<float>(side);
+      const Vec3f target(b.lo.x + fx * (b.hi.x - b.lo.x), b.lo.y + fy * (b.hi.y - b.lo.y), b.center().z);
+      Ray ray;
+      ray.origin = eye;
+      ray.direction = target - eye;
+      const std::size_t i = rays.size();
+      if (i % 97 == 13) ray.origin.x += 1e-3f;
+      if (i % 89 == 7) ray.tfar = 0.5f;
+      if (i % 83 == 5) ray.tnear = 0.9f;
+      if (i % 101 == 3) ray.direction.x = 0.0f;
+      rays.push_back(ray);
+    }
+  }
+  return rays;
+}
+
+TEST(WideBvh, CameraRunsTracedAsPacketsMatchTheScalarReference) {
+  const BrickData bunny = load_brick_from(accel_test::bunny_path());
+  const float reach = length(bounds_of(bunny).extent());
+  const auto side = static_cast<uint32_t>(std::sqrt(static_cast<double>(kRays)));
+  // Looking down each axis and from a corner, so every permutation occurs.
+  for (const Vec3f& offset : {Vec3f(0, 0, 2 * reach), Vec3f(0, 0, -2 * reach), Vec3f(2 * reach, 0.1f, 0.2f),
+                              Vec3f(0.1f, -2 * reach, 0.3f), Vec3f(reach, reach, reach)}) {
+    const std::vector<Ray> rays = camera_rays(bunny, side, offset);
+    expect_paths_match_reference("bunny camera", build_trees(bunny), rays, rays.size() / 10);
+  }
+  const BrickData sphere = load_brick_from("gen:sphere?level=4");
+  const std::vector<Ray> inside = camera_rays(sphere, side, Vec3f(0.01f, 0.02f, 0.03f));  // from inside
+  expect_paths_match_reference("sphere from inside", build_trees(sphere), inside, inside.size() / 2);
 }
 
 TEST(WideBvh, LeavesOfEveryShapeAndSize) {

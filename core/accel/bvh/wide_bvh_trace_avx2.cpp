@@ -16,6 +16,7 @@
 #pragma GCC push_options
 #pragma GCC target("avx2")
 #include "core/accel/bvh/wide_bvh_kernels.h"
+#include "core/accel/bvh/wide_bvh_packet_kernels.h"
 
 namespace outcore::wide_avx2 {
 
@@ -26,7 +27,9 @@ void intersect(TriangleTest test, const WideBvhView& tree, std::span<const uint3
   using namespace wide_kernels;
   switch (test) {
     case TriangleTest::kMt: return intersect_rays<V, MtLanes<V>>(tree, ray_ids, rays, hits);
-    case TriangleTest::kWatertight: return intersect_rays<V, WatertightLanes<V>>(tree, ray_ids, rays, hits);
+    case TriangleTest::kWatertight:
+      return intersect_watertight_coherent<V>({std::span<const WideBvhView>(&tree, 1), {}}, ray_ids, rays,
+                                              hits);
     case TriangleTest::kDouble:
       return intersect_rays<V, ScalarLanes<V, DoubleTriangleTest>>(tree, ray_ids, rays, hits);
   }
@@ -49,7 +52,7 @@ void set_intersect(TriangleTest test, const WideBvhSetView& set, std::span<const
   using namespace wide_kernels;
   switch (test) {
     case TriangleTest::kMt: return intersect_set<V, MtLanes<V>>(set, ray_ids, rays, hits);
-    case TriangleTest::kWatertight: return intersect_set<V, WatertightLanes<V>>(set, ray_ids, rays, hits);
+    case TriangleTest::kWatertight: return intersect_watertight_coherent<V>(set, ray_ids, rays, hits);
     case TriangleTest::kDouble:
       return intersect_set<V, ScalarLanes<V, DoubleTriangleTest>>(set, ray_ids, rays, hits);
   }

@@ -1,0 +1,292 @@
+// Ray packets for the wide BVH: closest hits of up to V::kWidth rays that
+// leave one origin with the same watertight axis permutation (a camera's
+// rays, in pixel order) traced together, one ray per lane: each node's and
+// each triangle's data are fetched once for the packet, and the walk is
+// decided once for it. Rays that do not form such a run take the single-ray
+// walk (wide_bvh_kernels.h). Compiled like that header, once per lane type.
+//
+// Exact as the single-ray walk: a lane's box test is the same conservative
+// slab test (margin kBoxMargin, a NaN slab distance constrains nothing), and
+// a lane's triangle test is the scalar watertight test's IEEE operations in
+// its order (the shared permutation makes the vertex rows the same for every
+// lane), so t, u, v are bitwise the scalar test's; ties go by
+// hit_is_better; the answers are bitwise the single-ray walk's (tested).
+//
+// Thread-safety: pure functions over an immutable WideBvhView.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <limits>
+
+#include "core/accel/bvh/wide_bvh_kernels.h"
+
+namespace outcore::wide_kernels {
+
+// Up to V::kWidth rays traced as one packet.
+template <class V>
+class WatertightPacket {
+ public:
+  using F = typename V::F;
+  static constexpr uint32_t kWidth = V::kWidth;
+
+  // Rays rays[ids[0..count)], which share the permutation of rays[ids[0]].
+  WatertightPacket(const Ray* rays, const uint32_t* ids, uint32_t count, Hit* hits) : hits_(hits) {
+    const WatertightTriangleTest::Prepared first = WatertightTriangleTest::prepare(rays[ids[0]]);
+    kx_ = first.kx;
+    ky_ = first.ky;
+    kz_ = first.kz;
+    alignas(32) float o[3][kWidth], inv[3][kWidth], po[3][kWidth], s[3][kWidth], tnear[kWidth];
+    for (uint32_t lane = 0; lane < kWidth; ++lane) {
+      const uint32_t id = ids[lane < count ? lane : 0];
+      const Ray& ray = rays[id];
+      const WatertightTriangleTest::Prepared p = WatertightTriangleTest::prepare(ray);
+      for (int a = 0; a < 3; ++a) {
+        o[a][lane] = ray.origin[a];
+        inv[a][lane] = 1.0f / ray.direction[a];
+      }
+      po[0][lane] = p.ox;
+      po[1][lane] = p.oy;
+      po[2][lane] = p.oz;
+      s[0][lane] = p.sx;
+      s[1][lane] = p.sy;
+      s[2][lane] = p.sz;
+      tnear[lane] = ray.tnear;
+      ids_[lane] = id;
+      direction_[lane] = ray.direction;
+      const Hit& best = hits[id];
+      tmax_[lane] = ray.tfar < best.t ? ray.tfar : best.t;
+      if (lane < count && tmax_[lane] > ray.tnear) active_ |= 1u << lane;
+    }
+    for (int a = 0; a < 3; ++a) {
+      origin_[a] = V::load(o[a]);
+      inverse_[a] = V::load(inv[a]);
+      permuted_origin_[a] = V::load(po[a]);
+      shear_[a] = V::load(s[a]);
+    }
+    tnear_ = V::load(tnear);
+  }
+
+  void trace(const WideBvhView& tree) {
+    if (active_ == 0 || tree.nodes.empty()) return;
+    struct Item {
+      uint32_t ref, triangles, lanes;
+      float entry;  // the smallest entry of its lanes
+    };
+    std::array<Item, (kWideBvhWidth - 1) * kMaxBvhDepth + kWideBvhWidth> stack;
+    uint32_t top = 0;
+    stack[top++] = {0, 0, active_, -std::numeric_limits<float>::infinity()};
+    while (top > 0) {
+      const Item item = stack[--top];
+      if (!may_matter(item.lanes, item.entry)) continue;
+      if (item.triangles != 0) {
+        test_leaf(tree.packets.data(), item.ref, item.triangles, item.lanes);
+        continue;
+      }
+      const WideBvhNode& node = tree.nodes[item.ref];
+      const uint32_t base = top;
+      for (uint32_t bits = node.child_mask(); bits != 0; bits &= bits - 1) {
+        const auto k = static_cast<uint32_t>(__builtin_ctz(bits));
+        float entry;
+        const uint32_t lanes = box_lanes(node, k, item.lanes, entry);
+        if (lanes == 0) continue;
+        const Item child{node.child[k], node.leaf_triangles[k], lanes, entry};
+        if (child.triangles == 0) prefetch_lines(&tree.nodes[child.ref], sizeof(WideBvhNode));
+        uint32_t j = top++;
+        for (; j > base && stack[j - 1].entry < child.entry; --j) stack[j] = stack[j - 1];
+        stack[j] = child;
+      }
+    }
+  }
+
+  // Completes each lane's best (barycentrics, normal).
+  void finish() {
+    for (uint32_t lane = 0; lane < kWidth; ++lane) {
+      if (found_packet_[lane] == nullptr) continue;
+      Hit& best = hits_[ids_[lane]];
+      best.u = found_hit_[lane].u;
+      best.v = found_hit_[lane].v;
+      best.normal = found_packet_[lane]->triangle(found_slot_lane_[lane]).unit_normal();
+    }
+  }
+
+ private:
+  // Whether any of `lanes` can still find a hit at or beyond `entry`.
+  bool may_matter(uint32_t lanes, float entry) const {
+    for (uint32_t bits = lanes; bits != 0; bits &= bits - 1) {
+      if (entry <= tmax_[__builtin_ctz(bits)]) return true;
+    }
+    return false;
+  }
+
+  // The lanes of `lanes` whose segment may touch child k's box; entry: the
+  // smallest lower bound of where they enter.
+  uint32_t box_lanes(const WideBvhNode& node, uint32_t k, uint32_t lanes, float& entry) const {
+    const F inf = V::set1(std::numeric_limits<float>::infinity());
+    const F minus_inf = V::set1(-std::numeric_limits<float>::infinity());
+    F lo = tnear_, hi = V::load_unaligned(tmax_);
+    for (int a = 0; a < 3; ++a) {
+      const F t0 = V::mul(V::sub(V::set1(node.lo[a][k]), origin_[a]), inverse_[a]);
+      const F t1 = V::mul(V::sub(V::set1(node.hi[a][k]), origin_[a]), inverse_[a]);
+      // Either distance NaN: the line lies in the slab's plane, no constraint.
+      const F nan = V::bit_or(V::neq(t0, t0), V::neq(t1, t1));
+      const F near = V::blend(V::min(t0, t1), minus_inf, nan);
+      const F far = V::blend(V::max(t0, t1), inf, nan);
+      lo = V::max(near, lo);
+      hi = V::min(far, hi);
+    }
+    const F down = V::set1(bvh_detail::kWidenDown), up = V::set1(bvh_detail::kWidenUp);
+    lo = V::min(V::mul(lo, down), V::mul(lo, up));
+    hi = V::max(V::mul(hi, down), V::mul(hi, up));
+    const uint32_t hit = lanes & V::mask(V::le(lo, hi));
+    if (hit != 0) {
+      alignas(32) float entries[kWidth];
+      V::store(entries, lo);
+      entry = std::numeric_limits<float>::infinity();
+      for (uint32_t bits = hit; bits != 0; bits &= bits - 1)
+        entry = std::min(entry, entries[__builtin_ctz(bits)]);
+    }
+    return hit;
+  }
+
+  void test_leaf(const TrianglePacket* packets, uint32_t first, uint32_t count, uint32_t lanes) {
+    for (uint32_t slot = first; slot < first + count; ++slot) {
+      const TrianglePacket& packet = packets[slot / kPacketLanes];
+      const uint32_t lane_of_slot = slot % kPacketLanes;
+      test_triangle(packet, lane_of_slot, lanes);
+    }
+  }
+
+  // The watertight test of one triangle against every lane, as the scalar
+  // test computes it for each ray.
+  void test_triangle(const TrianglePacket& packet, uint32_t slot_lane, uint32_t lanes) {
+    const auto vertex = [&](int v, int axis) { return V::set1(packet.coord[3 * v + axis][slot_lane]); };
+    const F& ox = permuted_origin_[0];
+    const F& oy = permuted_origin_[1];
+    const F& oz = permuted_origin_[2];
+    const F& sx = shear_[0];
+    const F& sy = shear_[1];
+    const F& sz = shear_[2];
+    const F az = V::sub(vertex(0, kz_), oz), bz = V::sub(vertex(1, kz_), oz), cz = V::sub(vertex(2, kz_), oz);
+    const F ax = V::sub(V::sub(vertex(0, kx_), ox), V::mul(sx, az));
+    const F ay = V::sub(V::sub(vertex(0, ky_), oy), V::mul(sy, az));
+    const F bx = V::sub(V::sub(vertex(1, kx_), ox), V::mul(sx, bz));
+    const F by = V::sub(V::sub(vertex(1, ky_), oy), V::mul(sy, bz));
+    const F cx = V::sub(V::sub(vertex(2, kx_), ox), V::mul(sx, cz));
+    const F cy = V::sub(V::sub(vertex(2, ky_), oy), V::mul(sy, cz));
+    F u = V::sub(V::mul(cx, by), V::mul(cy, bx));
+    F v = V::sub(V::mul(ax, cy), V::mul(ay, cx));
+    F w = V::sub(V::mul(bx, ay), V::mul(by, ax));
+    const F zero = V::set1(0.0f);
+    const uint32_t on_edge =
+        lanes & V::mask(V::bit_or(V::bit_or(V::eq(u, zero), V::eq(v, zero)), V::eq(w, zero)));
+    if (on_edge != 0) {
+      float parts[9][kWidth];
+      const F values[9] = {ax, ay, bx, by, cx, cy, u, v, w};
+      for (int k = 0; k < 9; ++k) V::store(parts[k], values[k]);
+      for (uint32_t bits = on_edge; bits != 0; bits &= bits - 1) {
+        const int i = __builtin_ctz(bits);
+        const double dax = parts[0][i], day = parts[1][i], dbx = parts[2][i], dby = parts[3][i];
+        const double dcx = parts[4][i], dcy = parts[5][i];
+        parts[6][i] = static_cast<float>(dcx * dby - dcy * dbx);
+        parts[7][i] = static_cast<float>(dax * dcy - day * dcx);
+        parts[8][i] = static_cast<float>(dbx * day - dby * dax);
+      }
+      u = V::load_unaligned(parts[6]);
+      v = V::load_unaligned(parts[7]);
+      w = V::load_unaligned(parts[8]);
+    }
+    const F negative = V::bit_or(V::bit_or(V::lt(u, zero), V::lt(v, zero)), V::lt(w, zero));
+    const F positive = V::bit_or(V::bit_or(V::gt(u, zero), V::gt(v, zero)), V::gt(w, zero));
+    uint32_t pass = lanes & ~(V::mask(negative) & V::mask(positive));
+    if (pass == 0) return;
+    const F det = V::add(V::add(u, v), w);
+    const F t = V::div(
+        V::add(V::add(V::mul(u, V::mul(sz, az)), V::mul(v, V::mul(sz, bz))), V::mul(w, V::mul(sz, cz))), det);
+    pass &= V::mask(
+        V::bit_and(V::bit_and(V::neq(det, zero), V::gt(t, tnear_)), V::le(t, V::load_unaligned(tmax_))));
+    if (pass == 0) return;
+    alignas(32) float ts[kWidth], vs[kWidth], ws[kWidth], dets[kWidth];
+    V::store(ts, t);
+    V::store(vs, v);
+    V::store(ws, w);
+    V::store(dets, det);
+    const Triangle tri = packet.triangle(slot_lane);
+    const uint32_t geometry_id = packet.geometry_id[slot_lane], primitive_id = packet.primitive_id[slot_lane];
+    for (uint32_t bits = pass; bits != 0; bits &= bits - 1) {
+      const auto lane = static_cast<uint32_t>(__builtin_ctz(bits));
+      if (WatertightTriangleTest::in_plane(direction_[lane], tri)) continue;
+      Hit& best = hits_[ids_[lane]];
+      if (!hit_is_better(ts[lane], geometry_id, primitive_id, best)) continue;
+      const float inv = 1.0f / dets[lane];
+      best.t = ts[lane];
+      best.geometry_id = geometry_id;
+      best.primitive_id = primitive_id;
+      found_packet_[lane] = &packet;
+      found_slot_lane_[lane] = slot_lane;
+      found_hit_[lane] = {ts[lane], vs[lane] * inv, ws[lane] * inv};
+      tmax_[lane] = ts[lane];  // inclusive: a tie may still win on its id
+    }
+  }
+
+  Hit* hits_;
+  int kx_ = 0, ky_ = 0, kz_ = 0;
+  uint32_t active_ = 0;
+  uint32_t ids_[kWidth];
+  Vec3f direction_[kWidth];
+  alignas(32) float tmax_[kWidth];
+  F origin_[3], inverse_[3], permuted_origin_[3], shear_[3], tnear_;
+  const TrianglePacket* found_packet_[kWidth] = {};
+  uint32_t found_slot_lane_[kWidth] = {};
+  TriangleHit found_hit_[kWidth] = {};
+};
+
+// The length of the run of rays from ray_ids[start] that may go as one
+// packet: the same origin, bitwise, and the same watertight permutation.
+template <uint32_t kWidth>
+inline uint32_t packet_run(std::span<const uint32_t> ray_ids, std::size_t start, const Ray* rays) {
+  const Ray& first = rays[ray_ids[start]];
+  const WatertightTriangleTest::Prepared p = WatertightTriangleTest::prepare(first);
+  uint32_t count = 1;
+  while (count < kWidth && start + count < ray_ids.size()) {
+    const Ray& next = rays[ray_ids[start + count]];
+    if (!(next.origin == first.origin)) break;
+    const WatertightTriangleTest::Prepared q = WatertightTriangleTest::prepare(next);
+    if (q.kx != p.kx || q.ky != p.ky || q.kz != p.kz) break;
+    ++count;
+  }
+  return count;
+}
+
+// Closest hits with the watertight test: packets where rays form runs of at
+// least half a packet, single rays elsewhere. trees: one tree, or the trees of
+// a set with their boxes.
+template <class V>
+void intersect_watertight_coherent(const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
+                                   const Ray* rays, Hit* hits) {
+  constexpr uint32_t kWidth = V::kWidth;
+  std::size_t i = 0;
+  while (i < ray_ids.size()) {
+    const uint32_t run = packet_run<kWidth>(ray_ids, i, rays);
+    if (run * 2 < kWidth) {
+      for (uint32_t k = 0; k < run; ++k) {
+        const std::span<const uint32_t> one = ray_ids.subspan(i + k, 1);
+        if (set.trees.size() == 1) {
+          intersect_rays<V, WatertightLanes<V>>(set.trees[0], one, rays, hits);
+        } else {
+          intersect_set<V, WatertightLanes<V>>(set, one, rays, hits);
+        }
+      }
+    } else {
+      WatertightPacket<V> packet(rays, ray_ids.data() + i, run, hits);
+      // Trees in order; each lane's best carries over, so the order only
+      // changes how much is pruned, never an answer.
+      for (const WideBvhView& tree : set.trees) packet.trace(tree);
+      packet.finish();
+    }
+    i += run;
+  }
+}
+
+}  // namespace outcore::wide_kernels
