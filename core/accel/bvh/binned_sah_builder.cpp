@@ -12,6 +12,10 @@ namespace {
 // Below this depth every split is an object median (see the header).
 constexpr uint32_t kMedianDepth = kMaxBvhDepth - 33;
 constexpr uint32_t kMaxBins = 256;
+// The wide collapse (wide_bvh_collapse.h) turns any subtree of at most one
+// packet (8 triangles) into a single leaf, so splitting such a node is work
+// the traced tree never sees: most nodes of a binary tree are that small.
+constexpr uint32_t kLeafWithoutSplit = 8;
 constexpr uint64_t kScratchBytes = 3 * kMaxBins * (sizeof(Aabb) + sizeof(uint32_t)) + kMaxBins * 16 + 4096;
 
 struct Task {
@@ -56,7 +60,10 @@ class SahBuild {
   // Builds the tree; returns the bytes held while building.
   uint64_t run();
   std::vector<BvhNode>& nodes() { return nodes_; }
-  void release_centroids() { centroids_ = {}; }
+  void release_centroids() {
+    centroids_ = {};
+    bounds_ = {};
+  }
 
  private:
   // Builds `task`'s node: a leaf, or two children pushed on the stack.
@@ -71,6 +78,7 @@ class SahBuild {
   const uint32_t bins_;
   std::vector<uint32_t>& order_;
   std::vector<Vec3f> centroids_;
+  std::vector<Aabb> bounds_;  // each triangle's, computed once
   std::vector<BvhNode> nodes_;
   std::vector<Aabb> bin_bounds_;
   std::vector<uint32_t> bin_counts_;
@@ -81,13 +89,18 @@ class SahBuild {
 uint64_t SahBuild::run() {
   const uint32_t n = static_cast<uint32_t>(triangles_.size());
   centroids_.resize(n);
-  for (uint32_t k = 0; k < n; ++k) centroids_[k] = triangles_[k].centroid();
+  bounds_.resize(n);
+  for (uint32_t k = 0; k < n; ++k) {
+    centroids_[k] = triangles_[k].centroid();
+    bounds_[k] = triangles_[k].bounds();
+  }
   order_.resize(n);
   for (uint32_t k = 0; k < n; ++k) order_[k] = k;
   nodes_.reserve(2 * uint64_t{n} - 1);
   nodes_.emplace_back();
-  const uint64_t build_bytes = centroids_.capacity() * sizeof(Vec3f) + order_.capacity() * sizeof(uint32_t) +
-                               nodes_.capacity() * sizeof(BvhNode) + kScratchBytes;
+  const uint64_t build_bytes = centroids_.capacity() * sizeof(Vec3f) + bounds_.capacity() * sizeof(Aabb) +
+                               order_.capacity() * sizeof(uint32_t) + nodes_.capacity() * sizeof(BvhNode) +
+                               kScratchBytes;
   bin_bounds_.resize(3 * bins_);
   bin_counts_.resize(3 * bins_);
   right_cost_.resize(bins_);
@@ -104,7 +117,7 @@ void SahBuild::build_node(const Task& task) {
   const uint32_t count = task.end - task.begin;
   Aabb bounds, centroid_bounds;
   for (uint32_t j = task.begin; j < task.end; ++j) {
-    bounds.extend(triangles_[order_[j]].bounds());
+    bounds.extend(bounds_[order_[j]]);
     centroid_bounds.extend(centroids_[order_[j]]);
   }
   BvhNode& node = nodes_[task.node];
@@ -112,6 +125,11 @@ void SahBuild::build_node(const Task& task) {
   if (count == 1) {
     node.index = task.begin;
     node.count = 1;
+    return;
+  }
+  if (count <= config_.max_leaf_size && count <= kLeafWithoutSplit) {
+    node.index = task.begin;
+    node.count = count;
     return;
   }
   const BinScale scale(centroid_bounds, bins_);
@@ -138,7 +156,7 @@ Split SahBuild::best_binned_split(const Task& task, const Aabb& bounds, const Bi
   std::fill(bin_bounds_.begin(), bin_bounds_.end(), Aabb{});
   std::fill(bin_counts_.begin(), bin_counts_.end(), 0u);
   for (uint32_t j = task.begin; j < task.end; ++j) {
-    const Aabb b = triangles_[order_[j]].bounds();
+    const Aabb& b = bounds_[order_[j]];
     const Vec3f& c = centroids_[order_[j]];
     for (int a = 0; a < 3; ++a) {
       if (!scale.usable[a]) continue;
@@ -216,9 +234,9 @@ Status BinnedSahBuilder::Config::validate() const {
 }
 
 uint64_t BinnedSahBuilder::peak_bytes_bound(uint64_t n) {
-  // centroids + order + nodes reserved for a full binary tree (2n - 1), then
+  // centroids, bounds + order + nodes reserved for a full binary tree (2n - 1), then
   // order + that + the exact copy (again at most 2n - 1 nodes).
-  return kScratchBytes + n * (sizeof(Vec3f) + sizeof(uint32_t)) + 4 * n * sizeof(BvhNode);
+  return kScratchBytes + n * (sizeof(Vec3f) + sizeof(Aabb) + sizeof(uint32_t)) + 4 * n * sizeof(BvhNode);
 }
 
 BinnedSahBuilder::Result BinnedSahBuilder::build(std::span<const Triangle> triangles, const Config& config) {

@@ -30,7 +30,9 @@ class BinnedSahBuilder {
     uint32_t bin_count = 16;
     // A node with more triangles is always split (by object median if no bin
     // boundary separates them); at most this many may form a leaf when the
-    // SAH says a leaf is cheaper. Range 1..255.
+    // SAH says a leaf is cheaper, and a node of at most min(this, 8) is a
+    // leaf without asking (the wide collapse keeps it one leaf anyway).
+    // Range 1..255.
     uint32_t max_leaf_size = 8;
     // SAH cost of visiting an inner node (testing its two child boxes) and of
     // one triangle test, in the same unit. With a scalar two-box test and a

@@ -1,5 +1,5 @@
 // BvhBrickSerializer: the subtree tier's serialiser for "bvh" bricks
-// (brick_serializer.h). The payload (version 3) is laid out so that a mapped
+// (brick_serializer.h). The payload (version 4) is laid out so that a mapped
 // file can be traversed in place, without copying or parsing the arrays:
 //
 //   offset 0   triangle test (uint8), 7 zero bytes
@@ -32,7 +32,7 @@ class BvhBrickSerializer final : public BrickSerializer {
  public:
   // Bump when the payload layout or the builder's output for a given config
   // changes, so older tier entries are never used.
-  static constexpr int kPayloadVersion = 3;
+  static constexpr int kPayloadVersion = 4;
   // Where the payload must start for load() to use it in place.
   static constexpr std::size_t kInPlaceAlignment = 64;
 

@@ -247,6 +247,8 @@ class WatertightPacket {
 template <uint32_t kWidth>
 inline uint32_t packet_run(std::span<const uint32_t> ray_ids, std::size_t start, const Ray* rays) {
   const Ray& first = rays[ray_ids[start]];
+  // Incoherent rays part at the first comparison, before any division.
+  if (start + 1 >= ray_ids.size() || !(rays[ray_ids[start + 1]].origin == first.origin)) return 1;
   const WatertightTriangleTest::Prepared p = WatertightTriangleTest::prepare(first);
   uint32_t count = 1;
   while (count < kWidth && start + count < ray_ids.size()) {
