@@ -50,8 +50,12 @@ struct BoxLanes {
   typename V::F widen_down, widen_up;
 
   explicit BoxLanes(const Ray& ray) {
+    // The three divisions in one: each lane is the IEEE quotient 1 / d.
+    alignas(16) float inverses[4];
+    _mm_store_ps(inverses, _mm_div_ps(_mm_set1_ps(1.0f),
+                                      _mm_setr_ps(ray.direction.x, ray.direction.y, ray.direction.z, 1.0f)));
     for (int axis = 0; axis < 3; ++axis) {
-      const float inv = 1.0f / ray.direction[axis];
+      const float inv = inverses[axis];
       origin[axis] = V::set1(ray.origin[axis]);
       inverse[axis] = V::set1(inv);
       const bool negative = std::signbit(inv);
@@ -119,16 +123,11 @@ inline bool for_each_lane_group(const TrianglePacket* packets, uint32_t first, u
 template <class V>
 class WatertightLanes {
  public:
-  explicit WatertightLanes(const Ray& ray) : scalar_(WatertightTriangleTest::prepare(ray)) {
-    ox_ = V::set1(scalar_.ox);
-    oy_ = V::set1(scalar_.oy);
-    oz_ = V::set1(scalar_.oz);
-    sx_ = V::set1(scalar_.sx);
-    sy_ = V::set1(scalar_.sy);
-    sz_ = V::set1(scalar_.sz);
-  }
+  // Prepared at the first leaf: many brick visits of a ray reach none.
+  explicit WatertightLanes(const Ray& ray) : ray_(ray) {}
 
   uint32_t candidates(const TrianglePacket& packet, uint32_t lane, uint32_t valid, float tnear, float tfar) {
+    if (!prepared_) prepare();
     const WatertightTriangleTest::Prepared& r = scalar_;
     const auto row = [&](int vertex, int axis) { return V::load(&packet.coord[3 * vertex + axis][lane]); };
     using F = typename V::F;
@@ -190,7 +189,20 @@ class WatertightLanes {
   }
 
  private:
-  WatertightTriangleTest::Prepared scalar_;
+  void prepare() {
+    scalar_ = WatertightTriangleTest::prepare(ray_);
+    ox_ = V::set1(scalar_.ox);
+    oy_ = V::set1(scalar_.oy);
+    oz_ = V::set1(scalar_.oz);
+    sx_ = V::set1(scalar_.sx);
+    sy_ = V::set1(scalar_.sy);
+    sz_ = V::set1(scalar_.sz);
+    prepared_ = true;
+  }
+
+  const Ray& ray_;
+  bool prepared_ = false;
+  WatertightTriangleTest::Prepared scalar_{};
   typename V::F ox_, oy_, oz_, sx_, sy_, sz_;
   float t_[V::kWidth], v_[V::kWidth], w_[V::kWidth], det_[V::kWidth];
 };
