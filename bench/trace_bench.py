@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """Trace benchmark: in-process `outcore trace` against Open3D's
 RaycastingScene.cast_rays on the same triangles and the same rays, same run,
-2 threads each. Scenes: the bunny and a generated city (~15 M triangles).
+2 threads each. Scenes: the bunny, a generated city (~15 M triangles) and
+`sparse`, 27 spaced copies of the Igea scan (7.25 M triangles, most of its box
+empty: bench/sparse_scene.py; not in the default set).
 
 For each scene and ray set (1M incoherent, 1M camera; bench/make_rays.py):
 - outcore trace --repeat R: run 1 is cold (every brick built: time to first
@@ -10,10 +12,11 @@ For each scene and ray set (1M incoherent, 1M camera; bench/make_rays.py):
 - Open3D 0.20 cast_rays, median of R runs, on the triangles read back from the
   store's brick file (so both trace bit-identical triangles);
 - agreement: the fraction of rays whose hit/miss and (geometry, primitive) ids
-  agree between the two.
+  agree between the two;
+- hit fraction: the fraction of rays that hit anything (outcore's answers).
 
 Needs the bench venv: `bash scripts/install.sh --bench`.
-Usage: .venv-bench/bin/python bench/trace_bench.py [--runs 6] [--rays 1000000] [--scenes bunny,city]
+Usage: .venv-bench/bin/python bench/trace_bench.py [--runs 6] [--rays 1000000] [--scenes bunny,city,sparse]
        [--outcore build/client/outcore] [--work build/bench-trace] [--cache-mb 8192] [--json rows.json] [--png chart.png]
 """
 import argparse
@@ -27,10 +30,12 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from common import (OUTCORE, ROOT, make_rays, open3d_scene, open3d_timed_cast,  # noqa: E402,F401
                     prepare_store, read_store_triangles, run)
+from sparse_scene import write_sparse_scene  # noqa: E402
 
 SCENES = {
     "bunny": [os.path.join(ROOT, "tests", "data", "models", "stanford-bunny.obj")],
     "city": ["gen:city?of=(gen:sphere?level=5)&copies=732"],  # 14.99 M triangles
+    "sparse": None,  # written into the work directory by write_sparse_scene
 }
 CACHE_MB = 8192
 
@@ -72,7 +77,8 @@ def main():
     os.makedirs(a.work, exist_ok=True)
     rows = []
     for name in a.scenes.split(","):
-        store, info = prepare_store(OUTCORE, a.work, name, SCENES[name])
+        inputs = SCENES[name] if SCENES[name] is not None else [write_sparse_scene(OUTCORE, a.work)]
+        store, info = prepare_store(OUTCORE, a.work, name, inputs)
         with open(info) as f:
             bricks = json.load(f)["bricks"]
         tris, ids = read_store_triangles(store)
@@ -95,17 +101,18 @@ def main():
             row = dict(scene=name, triangles=len(tris), bricks=bricks, rays=kind,
                        outcore_warm_Mrays=n / warm / 1e6, open3d_Mrays=n / o3d_s / 1e6, ratio=o3d_s / warm,
                        noreorder_Mrays=n / warm_noreorder / 1e6, reorder_gain=warm_noreorder / warm,
-                       cold_s=cold, agreement=agree, load_avg=os.getloadavg()[0])
+                       cold_s=cold, agreement=agree, hit_fraction=float(np.mean(ours_hit)),
+                       load_avg=os.getloadavg()[0])
             rows.append(row)
             print(json.dumps(row), flush=True)
     print(f"\nload average (1 min) at start {load_before:.1f}, at end {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     print("\n| scene | triangles | bricks | rays | outcore warm M rays/s | Open3D M rays/s | ratio vs Open3D | no-reorder M rays/s "
-          "| reorder gain | cold run s (first answer) | agreement |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+          "| reorder gain | cold run s (first answer) | agreement | rays hitting |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['scene']} | {r['triangles']:,} | {r['bricks']} | {r['rays']} | {r['outcore_warm_Mrays']:.2f} | "
               f"{r['open3d_Mrays']:.2f} | {r['ratio']:.2f} | {r['noreorder_Mrays']:.2f} | {r['reorder_gain']:.2f} | "
-              f"{r['cold_s']:.2f} | {r['agreement'] * 100:.3f} % |")
+              f"{r['cold_s']:.2f} | {r['agreement'] * 100:.3f} % | {r['hit_fraction'] * 100:.1f} % |")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=1)

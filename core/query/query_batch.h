@@ -48,7 +48,7 @@ struct QueryBatch {
   // Resets ray i's answer; true when the ray is valid (ray_problem).
   bool reset_and_check(std::size_t i) const {
     reset_answer(i);
-    return ray_problem(rays[i]) == nullptr;
+    return ray_is_valid(rays[i]);
   }
   // In the chunked strategies: whether ray i is to be traced. Validated
   // apart, its flag says; otherwise it is reset and checked here, and counted

@@ -1,6 +1,7 @@
 // The queued strategy's first pass: every ray's first brick, found in
 // parallel chunks (8 rays at a time through the upper hierarchy where they
-// share a direction octant), and the ray queued there.
+// share a direction octant), and the ray queued there. A ray that enters no
+// brick is answered there (a miss) and never queued (RayWalk::start).
 #pragma once
 
 #include "core/query/brick_queues.h"

@@ -6,12 +6,23 @@
 // same bricks in the same order whatever the strategy, batch, budget or
 // thread count, so answers are bitwise identical across all of them.
 //
+// A walk begins with start(): a ray whose first upper walk finds no brick
+// (its segment misses the scene's box, or passes between the bricks' boxes)
+// is answered there, a miss, without its progress record being written, a
+// queue entry or any per-brick bookkeeping: on a sparse scene most rays hit
+// nothing, and they cost their validation and one short walk. No separate
+// test against the scene's box comes first: the walk's first node is that
+// test (its children's boxes cover the scene's box and are tested in one
+// SIMD operation), and a separate one, measured on the sparse benchmark
+// scene, saved about 5 ns of CPU per ray that misses the box but added about
+// 10 ns per ray that enters it.
+//
 // A brick the ray cannot hit by its proxy (ProxyGate) is passed over like a
 // traced brick without a hit; one the ray was traced against ahead of its
 // turn (trace_ahead.h) is passed over too, its hit (if any) taken now: the
 // visit happens, only earlier.
 //
-// Thread-safety: advance() runs concurrently on distinct rays.
+// Thread-safety: start() and advance() run concurrently on distinct rays.
 #pragma once
 
 #include <array>
@@ -81,6 +92,41 @@ struct RayWalk {
     for (; p.next < p.count; ++p.next) {
       if (ahead_state == nullptr || ahead_state[i][p.next] == kAheadNone) demand.sub(p.window[p.next].brick);
     }
+  }
+
+  // Begins ray i's walk (its answer reset, the ray valid): returns the first
+  // brick to trace it at, its progress `p` set up, or kInvalidId when the
+  // ray enters no brick, `p` then untouched. The same bricks, in the same
+  // order, as advance() from a fresh record.
+  uint32_t start(RayProgress& p, std::size_t i, VisitCounters& counters) const {
+    const Ray& ray = batch.rays[i];
+    const SlabRay slab_ray(ray);
+    const float limit = batch.horizon(i);
+    std::array<BrickKey, kWindow> window;
+    const uint32_t found =
+        upper.next_window(use_avx, slab_ray, ray.tnear, limit, BrickKey{}, window, counters.nodes);
+    return start_with_window(p, i, window, found, counters);
+  }
+
+  // start() for a ray whose first window (`found` keys after BrickKey{},
+  // over its whole segment) was found by other means (a packet walk).
+  uint32_t start_with_window(RayProgress& p, std::size_t i, const std::array<BrickKey, kWindow>& window,
+                             uint32_t found, VisitCounters& counters) const {
+    if (found == 0) {
+      ++counters.no_brick;
+      return kInvalidId;
+    }
+    p = RayProgress{};
+    p.window = window;
+    begin_window(p, i, found);
+    const BrickKey& key = p.window[0];
+    p.last = key;
+    p.next = 1;
+    if (gate.needs_no_test(key.brick) || gate.may_hit(key.brick, batch.rays[i], batch.horizon(i), counters))
+      return key.brick;
+    ++counters.skipped;
+    if (demand.tracking()) demand.sub(key.brick);
+    return advance(p, i, counters);
   }
 
   // Moves ray i (progress `p`) past its current brick; returns the next

@@ -132,8 +132,7 @@ void sweep_chunk(const RayWalk<kKind>& walk, SweepPins& pins, SweepScratch& loca
   std::size_t active = 0;
   for (std::size_t k = 0; k < size; ++k) {
     if (!batch.chunk_ray_valid(base + k, task.invalid)) continue;
-    local.progress[k] = RayProgress{};
-    const uint32_t brick = walk.advance(local.progress[k], base + k, task.counters);
+    const uint32_t brick = walk.start(local.progress[k], base + k, task.counters);
     if (brick == kInvalidId) continue;
     local.at[k] = brick;
     local.active[active++] = static_cast<uint32_t>(k);

@@ -20,11 +20,10 @@ Status run_sequential(StrategyContext<kKind>& ctx) {
   for (std::size_t i = 0; i < batch.size(); ++i) {
     if (!batch.valid[i]) continue;
     if (cancel_requested()) return batch_interrupted();
-    progress[i] = RayProgress{};
     const uint32_t id = static_cast<uint32_t>(i);
     const auto t0 = Clock::now();
     VisitCounters counters;
-    for (uint32_t brick = ctx.walk.advance(progress[i], i, counters); brick != kInvalidId;
+    for (uint32_t brick = ctx.walk.start(progress[i], i, counters); brick != kInvalidId;
          brick = ctx.walk.advance(progress[i], i, counters)) {
       PinnedBrick pin;
       OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx.cache, brick, pin, ctx.tally));

@@ -10,6 +10,7 @@ void BatchTally::add(const VisitCounters& counters) {
   stats.rays_traced_ahead += counters.ahead_traces;
   stats.proxy_tests += counters.proxy_tests;
   stats.bricks_skipped_by_proxy += counters.skipped;
+  stats.rays_entering_no_brick += counters.no_brick;
   proxy_ticks += counters.proxy_ticks;
 }
 

@@ -48,6 +48,7 @@ struct VisitCounters {
   uint64_t ahead_traces = 0;
   uint64_t rays_hit = 0;      // rays finished with a hit (queued path)
   uint64_t invalid_rays = 0;  // found invalid in the queued path's first pass
+  uint64_t no_brick = 0;      // valid rays whose walk found no brick (RayWalk::start)
 };
 
 // The batch's figures as it runs.

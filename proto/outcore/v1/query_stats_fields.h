@@ -39,5 +39,6 @@
   X(seconds_subtree_loads)          \
   X(rays_in_brick_set)              \
   X(subtree_loads_checked)          \
-  X(subtree_loads_kept)
+  X(subtree_loads_kept)             \
+  X(rays_entering_no_brick)
 // clang-format on
