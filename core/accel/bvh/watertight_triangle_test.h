@@ -39,12 +39,22 @@ struct WatertightTriangleTest {
     Vec3f direction;
   };
 
-  static Prepared prepare(const Ray& ray) {
-    const Vec3f d = ray.direction;
+  // The permutation alone (no division): kz the direction's largest axis.
+  struct Axes {
+    int kx, ky, kz;
+    bool operator==(const Axes&) const = default;
+  };
+  static Axes axes(const Vec3f& d) {
     const float ax = std::fabs(d.x), ay = std::fabs(d.y), az = std::fabs(d.z);
     const int kz = (ax >= ay && ax >= az) ? 0 : (ay >= az ? 1 : 2);
     int kx = (kz + 1) % 3, ky = (kx + 1) % 3;
     if (d[kz] < 0.0f) std::swap(kx, ky);  // keeps the winding of the transformed triangle
+    return {kx, ky, kz};
+  }
+
+  static Prepared prepare(const Ray& ray) {
+    const Vec3f d = ray.direction;
+    const auto [kx, ky, kz] = axes(d);
     Prepared p;
     p.kx = kx;
     p.ky = ky;

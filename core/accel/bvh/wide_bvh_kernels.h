@@ -117,6 +117,76 @@ inline bool for_each_lane_group(const TrianglePacket* packets, uint32_t first, u
   return false;
 }
 
+// Where watertight_lanes() leaves the lanes that pass.
+template <class V>
+struct WatertightLaneHits {
+  alignas(32) float t[V::kWidth], v[V::kWidth], w[V::kWidth], det[V::kWidth];
+};
+
+// The watertight test's float part (watertight_triangle_test.h) on V::kWidth
+// lanes, each lane with the scalar operations in the scalar order:
+// vertex(v, axis) gives vertex v's coordinate on that axis for every lane,
+// origin and shear are the permuted origin (x, y across the ray, z along
+// it) and shear per lane. An edge function that is 0 in float is redone,
+// with its two neighbours, in double, where the products are exact. Stores
+// t, v, w, det of the lanes of `lanes` that pass the edge signs, det != 0 and
+// tnear < t <= tfar in `out`; returns their mask. One triangle against many
+// rays (packets) and many triangles against one ray both use it.
+template <class V, class Vertex>
+inline uint32_t watertight_lanes(Vertex&& vertex, const WatertightTriangleTest::Axes& k,
+                                 const typename V::F (&origin)[3], const typename V::F (&shear)[3],
+                                 uint32_t lanes, typename V::F tnear, typename V::F tfar,
+                                 WatertightLaneHits<V>& out) {
+  using F = typename V::F;
+  const F &ox = origin[0], &oy = origin[1], &oz = origin[2];
+  const F &sx = shear[0], &sy = shear[1], &sz = shear[2];
+  const F az = V::sub(vertex(0, k.kz), oz), bz = V::sub(vertex(1, k.kz), oz),
+          cz = V::sub(vertex(2, k.kz), oz);
+  const F ax = V::sub(V::sub(vertex(0, k.kx), ox), V::mul(sx, az));
+  const F ay = V::sub(V::sub(vertex(0, k.ky), oy), V::mul(sy, az));
+  const F bx = V::sub(V::sub(vertex(1, k.kx), ox), V::mul(sx, bz));
+  const F by = V::sub(V::sub(vertex(1, k.ky), oy), V::mul(sy, bz));
+  const F cx = V::sub(V::sub(vertex(2, k.kx), ox), V::mul(sx, cz));
+  const F cy = V::sub(V::sub(vertex(2, k.ky), oy), V::mul(sy, cz));
+  F u = V::sub(V::mul(cx, by), V::mul(cy, bx));
+  F v = V::sub(V::mul(ax, cy), V::mul(ay, cx));
+  F w = V::sub(V::mul(bx, ay), V::mul(by, ax));
+  const F zero = V::set1(0.0f);
+  const uint32_t on_edge =
+      lanes & V::mask(V::bit_or(V::bit_or(V::eq(u, zero), V::eq(v, zero)), V::eq(w, zero)));
+  if (on_edge != 0) {
+    float parts[9][V::kWidth];
+    const F values[9] = {ax, ay, bx, by, cx, cy, u, v, w};
+    for (int p = 0; p < 9; ++p) V::store(parts[p], values[p]);
+    for (uint32_t bits = on_edge; bits != 0; bits &= bits - 1) {
+      const int i = __builtin_ctz(bits);
+      const double dax = parts[0][i], day = parts[1][i], dbx = parts[2][i], dby = parts[3][i];
+      const double dcx = parts[4][i], dcy = parts[5][i];
+      parts[6][i] = static_cast<float>(dcx * dby - dcy * dbx);
+      parts[7][i] = static_cast<float>(dax * dcy - day * dcx);
+      parts[8][i] = static_cast<float>(dbx * day - dby * dax);
+    }
+    u = V::load_unaligned(parts[6]);
+    v = V::load_unaligned(parts[7]);
+    w = V::load_unaligned(parts[8]);
+  }
+  const F negative = V::bit_or(V::bit_or(V::lt(u, zero), V::lt(v, zero)), V::lt(w, zero));
+  const F positive = V::bit_or(V::bit_or(V::gt(u, zero), V::gt(v, zero)), V::gt(w, zero));
+  uint32_t pass = lanes & ~(V::mask(negative) & V::mask(positive));
+  if (pass == 0) return 0;
+  const F det = V::add(V::add(u, v), w);
+  const F t = V::div(
+      V::add(V::add(V::mul(u, V::mul(sz, az)), V::mul(v, V::mul(sz, bz))), V::mul(w, V::mul(sz, cz))), det);
+  pass &= V::mask(V::bit_and(V::bit_and(V::neq(det, zero), V::gt(t, tnear)), V::le(t, tfar)));
+  if (pass != 0) {
+    V::store(out.t, t);
+    V::store(out.v, v);
+    V::store(out.w, w);
+    V::store(out.det, det);
+  }
+  return pass;
+}
+
 // The watertight test on V::kWidth lanes. candidates() leaves the lanes
 // that pass every float test (edge signs, det != 0, tnear < t <= tfar);
 // accept() finishes one: the in-plane check and the barycentrics.
@@ -128,83 +198,35 @@ class WatertightLanes {
 
   uint32_t candidates(const TrianglePacket& packet, uint32_t lane, uint32_t valid, float tnear, float tfar) {
     if (!prepared_) prepare();
-    const WatertightTriangleTest::Prepared& r = scalar_;
     const auto row = [&](int vertex, int axis) { return V::load(&packet.coord[3 * vertex + axis][lane]); };
-    using F = typename V::F;
-    const F az = V::sub(row(0, r.kz), oz_), bz = V::sub(row(1, r.kz), oz_), cz = V::sub(row(2, r.kz), oz_);
-    const F ax = V::sub(V::sub(row(0, r.kx), ox_), V::mul(sx_, az));
-    const F ay = V::sub(V::sub(row(0, r.ky), oy_), V::mul(sy_, az));
-    const F bx = V::sub(V::sub(row(1, r.kx), ox_), V::mul(sx_, bz));
-    const F by = V::sub(V::sub(row(1, r.ky), oy_), V::mul(sy_, bz));
-    const F cx = V::sub(V::sub(row(2, r.kx), ox_), V::mul(sx_, cz));
-    const F cy = V::sub(V::sub(row(2, r.ky), oy_), V::mul(sy_, cz));
-    F u = V::sub(V::mul(cx, by), V::mul(cy, bx));
-    F v = V::sub(V::mul(ax, cy), V::mul(ay, cx));
-    F w = V::sub(V::mul(bx, ay), V::mul(by, ax));
-    const F zero = V::set1(0.0f);
-    const uint32_t on_edge =
-        valid & V::mask(V::bit_or(V::bit_or(V::eq(u, zero), V::eq(v, zero)), V::eq(w, zero)));
-    if (on_edge != 0) {
-      // As the scalar test: an edge function that is 0 in float is redone,
-      // with its two neighbours, in double, where the products are exact.
-      float lanes[9][V::kWidth];
-      const F parts[9] = {ax, ay, bx, by, cx, cy, u, v, w};
-      for (int k = 0; k < 9; ++k) V::store(lanes[k], parts[k]);
-      for (uint32_t bits = on_edge; bits != 0; bits &= bits - 1) {
-        const int i = __builtin_ctz(bits);
-        const double dax = lanes[0][i], day = lanes[1][i], dbx = lanes[2][i], dby = lanes[3][i];
-        const double dcx = lanes[4][i], dcy = lanes[5][i];
-        lanes[6][i] = static_cast<float>(dcx * dby - dcy * dbx);
-        lanes[7][i] = static_cast<float>(dax * dcy - day * dcx);
-        lanes[8][i] = static_cast<float>(dbx * day - dby * dax);
-      }
-      u = V::load_unaligned(lanes[6]);
-      v = V::load_unaligned(lanes[7]);
-      w = V::load_unaligned(lanes[8]);
-    }
-    const F negative = V::bit_or(V::bit_or(V::lt(u, zero), V::lt(v, zero)), V::lt(w, zero));
-    const F positive = V::bit_or(V::bit_or(V::gt(u, zero), V::gt(v, zero)), V::gt(w, zero));
-    uint32_t pass = valid & ~(V::mask(negative) & V::mask(positive));
-    if (pass == 0) return 0;
-    const F det = V::add(V::add(u, v), w);
-    const F t = V::div(
-        V::add(V::add(V::mul(u, V::mul(sz_, az)), V::mul(v, V::mul(sz_, bz))), V::mul(w, V::mul(sz_, cz))),
-        det);
-    pass &=
-        V::mask(V::bit_and(V::bit_and(V::neq(det, zero), V::gt(t, V::set1(tnear))), V::le(t, V::set1(tfar))));
-    if (pass != 0) {
-      V::store(t_, t);
-      V::store(v_, v);
-      V::store(w_, w);
-      V::store(det_, det);
-    }
-    return pass;
+    return watertight_lanes<V>(row, axes_, origin_, shear_, valid, V::set1(tnear), V::set1(tfar), hits_);
   }
 
   bool accept(const TrianglePacket& packet, uint32_t lane, uint32_t bit, TriangleHit& hit) const {
-    if (WatertightTriangleTest::in_plane(scalar_.direction, packet.triangle(lane + bit))) return false;
-    const float inv = 1.0f / det_[bit];
-    hit = {t_[bit], v_[bit] * inv, w_[bit] * inv};
+    if (WatertightTriangleTest::in_plane(ray_.direction, packet.triangle(lane + bit))) return false;
+    const float inv = 1.0f / hits_.det[bit];
+    hit = {hits_.t[bit], hits_.v[bit] * inv, hits_.w[bit] * inv};
     return true;
   }
 
  private:
   void prepare() {
-    scalar_ = WatertightTriangleTest::prepare(ray_);
-    ox_ = V::set1(scalar_.ox);
-    oy_ = V::set1(scalar_.oy);
-    oz_ = V::set1(scalar_.oz);
-    sx_ = V::set1(scalar_.sx);
-    sy_ = V::set1(scalar_.sy);
-    sz_ = V::set1(scalar_.sz);
+    const WatertightTriangleTest::Prepared p = WatertightTriangleTest::prepare(ray_);
+    axes_ = {p.kx, p.ky, p.kz};
+    origin_[0] = V::set1(p.ox);
+    origin_[1] = V::set1(p.oy);
+    origin_[2] = V::set1(p.oz);
+    shear_[0] = V::set1(p.sx);
+    shear_[1] = V::set1(p.sy);
+    shear_[2] = V::set1(p.sz);
     prepared_ = true;
   }
 
   const Ray& ray_;
   bool prepared_ = false;
-  WatertightTriangleTest::Prepared scalar_{};
-  typename V::F ox_, oy_, oz_, sx_, sy_, sz_;
-  float t_[V::kWidth], v_[V::kWidth], w_[V::kWidth], det_[V::kWidth];
+  WatertightTriangleTest::Axes axes_{};
+  typename V::F origin_[3], shear_[3];
+  WatertightLaneHits<V> hits_;
 };
 
 // Moeller-Trumbore on V::kWidth lanes, the scalar test's operations in order.

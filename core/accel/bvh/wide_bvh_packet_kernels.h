@@ -33,10 +33,7 @@ class WatertightPacket {
 
   // Rays rays[ids[0..count)], which share the permutation of rays[ids[0]].
   WatertightPacket(const Ray* rays, const uint32_t* ids, uint32_t count, Hit* hits) : hits_(hits) {
-    const WatertightTriangleTest::Prepared first = WatertightTriangleTest::prepare(rays[ids[0]]);
-    kx_ = first.kx;
-    ky_ = first.ky;
-    kz_ = first.kz;
+    axes_ = WatertightTriangleTest::axes(rays[ids[0]].direction);
     alignas(32) float o[3][kWidth], inv[3][kWidth], po[3][kWidth], s[3][kWidth], tnear[kWidth];
     for (uint32_t lane = 0; lane < kWidth; ++lane) {
       const uint32_t id = ids[lane < count ? lane : 0];
@@ -162,76 +159,30 @@ class WatertightPacket {
   // test computes it for each ray.
   void test_triangle(const TrianglePacket& packet, uint32_t slot_lane, uint32_t lanes) {
     const auto vertex = [&](int v, int axis) { return V::set1(packet.coord[3 * v + axis][slot_lane]); };
-    const F& ox = permuted_origin_[0];
-    const F& oy = permuted_origin_[1];
-    const F& oz = permuted_origin_[2];
-    const F& sx = shear_[0];
-    const F& sy = shear_[1];
-    const F& sz = shear_[2];
-    const F az = V::sub(vertex(0, kz_), oz), bz = V::sub(vertex(1, kz_), oz), cz = V::sub(vertex(2, kz_), oz);
-    const F ax = V::sub(V::sub(vertex(0, kx_), ox), V::mul(sx, az));
-    const F ay = V::sub(V::sub(vertex(0, ky_), oy), V::mul(sy, az));
-    const F bx = V::sub(V::sub(vertex(1, kx_), ox), V::mul(sx, bz));
-    const F by = V::sub(V::sub(vertex(1, ky_), oy), V::mul(sy, bz));
-    const F cx = V::sub(V::sub(vertex(2, kx_), ox), V::mul(sx, cz));
-    const F cy = V::sub(V::sub(vertex(2, ky_), oy), V::mul(sy, cz));
-    F u = V::sub(V::mul(cx, by), V::mul(cy, bx));
-    F v = V::sub(V::mul(ax, cy), V::mul(ay, cx));
-    F w = V::sub(V::mul(bx, ay), V::mul(by, ax));
-    const F zero = V::set1(0.0f);
-    const uint32_t on_edge =
-        lanes & V::mask(V::bit_or(V::bit_or(V::eq(u, zero), V::eq(v, zero)), V::eq(w, zero)));
-    if (on_edge != 0) {
-      float parts[9][kWidth];
-      const F values[9] = {ax, ay, bx, by, cx, cy, u, v, w};
-      for (int k = 0; k < 9; ++k) V::store(parts[k], values[k]);
-      for (uint32_t bits = on_edge; bits != 0; bits &= bits - 1) {
-        const int i = __builtin_ctz(bits);
-        const double dax = parts[0][i], day = parts[1][i], dbx = parts[2][i], dby = parts[3][i];
-        const double dcx = parts[4][i], dcy = parts[5][i];
-        parts[6][i] = static_cast<float>(dcx * dby - dcy * dbx);
-        parts[7][i] = static_cast<float>(dax * dcy - day * dcx);
-        parts[8][i] = static_cast<float>(dbx * day - dby * dax);
-      }
-      u = V::load_unaligned(parts[6]);
-      v = V::load_unaligned(parts[7]);
-      w = V::load_unaligned(parts[8]);
-    }
-    const F negative = V::bit_or(V::bit_or(V::lt(u, zero), V::lt(v, zero)), V::lt(w, zero));
-    const F positive = V::bit_or(V::bit_or(V::gt(u, zero), V::gt(v, zero)), V::gt(w, zero));
-    uint32_t pass = lanes & ~(V::mask(negative) & V::mask(positive));
+    WatertightLaneHits<V> found;
+    const uint32_t pass = watertight_lanes<V>(vertex, axes_, permuted_origin_, shear_, lanes, tnear_,
+                                              V::load_unaligned(tmax_), found);
     if (pass == 0) return;
-    const F det = V::add(V::add(u, v), w);
-    const F t = V::div(
-        V::add(V::add(V::mul(u, V::mul(sz, az)), V::mul(v, V::mul(sz, bz))), V::mul(w, V::mul(sz, cz))), det);
-    pass &= V::mask(
-        V::bit_and(V::bit_and(V::neq(det, zero), V::gt(t, tnear_)), V::le(t, V::load_unaligned(tmax_))));
-    if (pass == 0) return;
-    alignas(32) float ts[kWidth], vs[kWidth], ws[kWidth], dets[kWidth];
-    V::store(ts, t);
-    V::store(vs, v);
-    V::store(ws, w);
-    V::store(dets, det);
     const Triangle tri = packet.triangle(slot_lane);
     const uint32_t geometry_id = packet.geometry_id[slot_lane], primitive_id = packet.primitive_id[slot_lane];
     for (uint32_t bits = pass; bits != 0; bits &= bits - 1) {
       const auto lane = static_cast<uint32_t>(__builtin_ctz(bits));
       if (WatertightTriangleTest::in_plane(direction_[lane], tri)) continue;
       Hit& best = hits_[ids_[lane]];
-      if (!hit_is_better(ts[lane], geometry_id, primitive_id, best)) continue;
-      const float inv = 1.0f / dets[lane];
-      best.t = ts[lane];
+      if (!hit_is_better(found.t[lane], geometry_id, primitive_id, best)) continue;
+      const float inv = 1.0f / found.det[lane];
+      best.t = found.t[lane];
       best.geometry_id = geometry_id;
       best.primitive_id = primitive_id;
       found_packet_[lane] = &packet;
       found_slot_lane_[lane] = slot_lane;
-      found_hit_[lane] = {ts[lane], vs[lane] * inv, ws[lane] * inv};
-      tmax_[lane] = ts[lane];  // inclusive: a tie may still win on its id
+      found_hit_[lane] = {found.t[lane], found.v[lane] * inv, found.w[lane] * inv};
+      tmax_[lane] = found.t[lane];  // inclusive: a tie may still win on its id
     }
   }
 
   Hit* hits_;
-  int kx_ = 0, ky_ = 0, kz_ = 0;
+  WatertightTriangleTest::Axes axes_{};
   uint32_t active_ = 0;
   uint32_t ids_[kWidth];
   Vec3f direction_[kWidth];
@@ -249,13 +200,11 @@ inline uint32_t packet_run(std::span<const uint32_t> ray_ids, std::size_t start,
   const Ray& first = rays[ray_ids[start]];
   // Incoherent rays part at the first comparison, before any division.
   if (start + 1 >= ray_ids.size() || !(rays[ray_ids[start + 1]].origin == first.origin)) return 1;
-  const WatertightTriangleTest::Prepared p = WatertightTriangleTest::prepare(first);
+  const WatertightTriangleTest::Axes axes = WatertightTriangleTest::axes(first.direction);
   uint32_t count = 1;
   while (count < kWidth && start + count < ray_ids.size()) {
     const Ray& next = rays[ray_ids[start + count]];
-    if (!(next.origin == first.origin)) break;
-    const WatertightTriangleTest::Prepared q = WatertightTriangleTest::prepare(next);
-    if (q.kx != p.kx || q.ky != p.ky || q.kz != p.kz) break;
+    if (!(next.origin == first.origin) || !(WatertightTriangleTest::axes(next.direction) == axes)) break;
     ++count;
   }
   return count;

@@ -1,0 +1,59 @@
+// The wide BVH's four entry points (closest and any hit, over one tree or a
+// brick set) with the triangle test chosen by name, written once over the
+// lane type and instantiated by wide_bvh_trace_sse4.cpp and
+// wide_bvh_trace_avx2.cpp, each for its own V (see wide_bvh_kernels.h). The
+// switch runs once per call, never per ray. Closest hits with the watertight
+// test go through the packet path for camera-like runs.
+//
+// Thread-safety: pure functions over immutable views.
+#pragma once
+
+#include <span>
+
+#include "core/accel/bvh/double_triangle_test.h"
+#include "core/accel/bvh/triangle_test_kind.h"
+#include "core/accel/bvh/wide_bvh_kernels.h"
+#include "core/accel/bvh/wide_bvh_packet_kernels.h"
+
+namespace outcore::wide_kernels {
+
+// Calls fn.template operator()<Lanes>() with the lane test of `test`.
+template <class V, class Fn>
+inline void with_lanes(TriangleTest test, Fn&& fn) {
+  switch (test) {
+    case TriangleTest::kMt: return fn.template operator()<MtLanes<V>>();
+    case TriangleTest::kWatertight: return fn.template operator()<WatertightLanes<V>>();
+    case TriangleTest::kDouble: return fn.template operator()<ScalarLanes<V, DoubleTriangleTest>>();
+  }
+}
+
+template <class V>
+void intersect_tree(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
+                    const Ray* rays, Hit* hits) {
+  if (test == TriangleTest::kWatertight) {
+    return intersect_watertight_coherent<V>({std::span<const WideBvhView>(&tree, 1), {}}, ray_ids, rays,
+                                            hits);
+  }
+  with_lanes<V>(test, [&]<class Lanes>() { intersect_rays<V, Lanes>(tree, ray_ids, rays, hits); });
+}
+
+template <class V>
+void occluded_tree(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
+                   const Ray* rays, uint8_t* occluded) {
+  with_lanes<V>(test, [&]<class Lanes>() { occluded_rays<V, Lanes>(tree, ray_ids, rays, occluded); });
+}
+
+template <class V>
+void intersect_brick_set(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
+                         const Ray* rays, Hit* hits) {
+  if (test == TriangleTest::kWatertight) return intersect_watertight_coherent<V>(set, ray_ids, rays, hits);
+  with_lanes<V>(test, [&]<class Lanes>() { intersect_set<V, Lanes>(set, ray_ids, rays, hits); });
+}
+
+template <class V>
+void occluded_brick_set(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
+                        const Ray* rays, uint8_t* occluded) {
+  with_lanes<V>(test, [&]<class Lanes>() { occluded_set<V, Lanes>(set, ray_ids, rays, occluded); });
+}
+
+}  // namespace outcore::wide_kernels
