@@ -41,8 +41,11 @@ constexpr std::size_t kRandomRays = 40'000;
 // evicted bricks' pages queued for release.
 [[maybe_unused]] uint64_t rss_allowance(uint64_t budget_bytes, std::size_t rays, std::size_t bricks,
                                         bool tier) {
+  // The tier's file reads (two threads loading at once) and the allocator's
+  // arenas: its runs peaked at 129-156 MiB at a 36 MiB budget (unlimited:
+  // 171-176 MiB), hence 44 MiB for it.
   return budget_bytes + 60 * kMiB + 160 * rays + 10 * 1024 * bricks + budget_bytes * 25 / 100 +
-         (tier ? 32 * kMiB : 0);
+         (tier ? 44 * kMiB : 0);
 }
 
 class OutOfCoreCli : public ::testing::Test {

@@ -39,9 +39,9 @@ class BrickBuilder {
   // proxies' rounding bound (core/proxy/brick_proxy.h). Moeller-Trumbore's
   // unless the structure's test is watertight.
   virtual double hit_rounding_scale() const { return kMollerTrumboreHitRounding; }
-  // Whether make_resident_set() can give a set over this builder's bricks
-  // (asked before the engine pins every brick for one).
-  virtual bool offers_resident_set() const { return false; }
+  // The most bricks make_resident_set() serves well (0: it offers no set);
+  // asked before the engine pins every brick for one.
+  virtual uint32_t resident_set_max_bricks() const { return 0; }
   // One structure over `bricks` (each built by this builder and pinned while
   // the set lives; core/accel/resident_brick_set.h), or nullptr when the
   // structure has no such fast path.

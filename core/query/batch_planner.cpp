@@ -7,7 +7,7 @@ namespace {
 // scene is not traced through a resident set.
 std::string_view why_no_set(const QueryOptions& options, const BatchFacts& facts) {
   if (!options.brick_set) return "every brick resident, few bricks; the resident set is off";
-  if (!facts.builder_offers_resident_set)
+  if (facts.resident_set_max_bricks == 0)
     return "every brick resident, few bricks; the brick structure offers no resident set";
   if (facts.brick_count == 0) return "every brick resident, few bricks; the scene has no bricks";
   return "every brick resident, few bricks; the batch is below brick_set_min_rays";
@@ -30,10 +30,10 @@ BatchPlan plan_batch(const QueryOptions& options, const BatchFacts& facts) {
   // bricks buys no reuse.
   const bool all_resident = facts.cache_fits_scene && facts.resident_bricks == facts.brick_count;
   const bool few_bricks = facts.brick_count <= kChunkedMaxBricks;
-  if (all_resident && few_bricks && options.brick_set && facts.builder_offers_resident_set &&
+  if (all_resident && options.brick_set && facts.brick_count <= facts.resident_set_max_bricks &&
       facts.brick_count > 0 && facts.rays >= options.brick_set_min_rays) {
     return {BatchStrategy::kResidentSet,
-            "every brick resident, few bricks, a resident set offered, a large batch"};
+            "every brick resident, a resident set offered for them, a large batch"};
   }
   if (all_resident && few_bricks && options.in_cache_sweep)
     return {BatchStrategy::kInCacheSweep, why_no_set(options, facts)};

@@ -4,10 +4,10 @@
 //
 //   sequential      reordering off: rays one by one in input order.
 //   resident set    every brick resident under a budget that holds the
-//                   scene, at most kChunkedMaxBricks bricks, the brick
-//                   structure offers a ResidentBrickSet, the set is on, and
-//                   the batch has at least brick_set_min_rays rays (the set
-//                   is made per batch).
+//                   scene, the brick structure offers a ResidentBrickSet
+//                   for that many bricks, the set is on, and the batch has
+//                   at least brick_set_min_rays rays (the set is made per
+//                   batch).
 //   in-cache sweep  every brick resident under a budget that holds the
 //                   scene, at most kChunkedMaxBricks bricks, the sweep on.
 //   queued          otherwise: rays queue at bricks, brick by brick.
@@ -36,8 +36,8 @@ struct BatchFacts {
   std::size_t rays = 0;
   uint32_t brick_count = 0;
   uint32_t resident_bricks = 0;
-  bool cache_fits_scene = false;  // the budget holds every brick at once
-  bool builder_offers_resident_set = false;
+  bool cache_fits_scene = false;         // the budget holds every brick at once
+  uint32_t resident_set_max_bricks = 0;  // the builder's (0: it offers no set)
 };
 
 struct BatchPlan {

@@ -13,7 +13,7 @@ BatchFacts open_facts() {
   facts.brick_count = 3;
   facts.resident_bricks = 3;
   facts.cache_fits_scene = true;
-  facts.builder_offers_resident_set = true;
+  facts.resident_set_max_bricks = kChunkedMaxBricks;
   return facts;
 }
 
@@ -40,6 +40,18 @@ TEST(BatchPlanner, AResidentSceneOfFewBricksAndALargeBatchTakeTheResidentSet) {
   EXPECT_EQ(plan_batch(QueryOptions{}, edge).strategy, BatchStrategy::kResidentSet);
 }
 
+TEST(BatchPlanner, ASetOfferedForAnyNumberOfBricksServesAResidentSceneOfMany) {
+  BatchFacts many = open_facts();
+  many.brick_count = many.resident_bricks = 5000;
+  many.resident_set_max_bricks = 5000;
+  EXPECT_EQ(plan_batch(QueryOptions{}, many).strategy, BatchStrategy::kResidentSet);
+  // One brick beyond what the structure offers: queued (too many to sweep).
+  many.resident_set_max_bricks = 4999;
+  const BatchPlan plan = plan_batch(QueryOptions{}, many);
+  EXPECT_EQ(plan.strategy, BatchStrategy::kQueued);
+  EXPECT_EQ(plan.reason, "too many bricks for the chunked strategies");
+}
+
 TEST(BatchPlanner, WithoutTheSetAResidentSceneOfFewBricksIsSwept) {
   QueryOptions off;
   off.brick_set = false;
@@ -48,7 +60,7 @@ TEST(BatchPlanner, WithoutTheSetAResidentSceneOfFewBricksIsSwept) {
   EXPECT_NE(plan.reason.find("resident set is off"), std::string_view::npos) << plan.reason;
 
   BatchFacts no_offer = open_facts();
-  no_offer.builder_offers_resident_set = false;
+  no_offer.resident_set_max_bricks = 0;
   plan = plan_batch(QueryOptions{}, no_offer);
   EXPECT_EQ(plan.strategy, BatchStrategy::kInCacheSweep);
   EXPECT_NE(plan.reason.find("offers no resident set"), std::string_view::npos) << plan.reason;

@@ -119,7 +119,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
                            .brick_count = brick_count,
                            .resident_bricks = cache_->counters().resident_bricks,
                            .cache_fits_scene = cache_fits_scene_,
-                           .builder_offers_resident_set = cache_->builder().offers_resident_set()});
+                           .resident_set_max_bricks = cache_->builder().resident_set_max_bricks()});
   // The chunked strategies validate rays in their own chunks, and the queues
   // in the chunks of their first upper pass (one pass less over the rays'
   // memory), except in strict mode, where a bad ray must stop the batch

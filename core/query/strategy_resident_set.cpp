@@ -60,7 +60,7 @@ Status run_resident_set(StrategyContext<kKind>& ctx) {
   const auto t_set = Clock::now();
   OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<ResidentBrickSet> set,
                            ctx.cache.builder().make_resident_set(accels));
-  // The planner asked offers_resident_set(): a builder that offers one makes one.
+  // The planner asked resident_set_max_bricks(): a builder that offers one makes one.
   if (set == nullptr) return internal_error("the brick structure offered a resident set but made none");
   stats.seconds_upper += seconds_since(t_set);
   const auto t_trace = Clock::now();

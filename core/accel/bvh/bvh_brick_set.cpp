@@ -4,6 +4,7 @@
 #include <limits>
 #include <string>
 
+#include "core/accel/bvh/wide_bvh_top_level.h"
 #include "core/accel/bvh/wide_bvh_trace.h"
 
 namespace outcore {
@@ -36,41 +37,20 @@ Expected<std::unique_ptr<BvhBrickSet>> BvhBrickSet::build(std::span<const BvhBri
                               std::string(triangle_test_name(set->test_)));
     }
     if (brick->view().nodes.empty()) continue;
-    if (set->trees_.size() == kMaxWideBvhSetTrees) {
-      return invalid_argument("bvh brick set: more than " + std::to_string(kMaxWideBvhSetTrees) +
-                              " bricks with triangles");
-    }
     set->trees_.push_back(brick->view());
   }
-  const std::size_t rows = (set->trees_.size() + kWideBvhWidth - 1) / kWideBvhWidth;
-  set->boxes_.resize(rows);
-  for (WideBvhNode& node : set->boxes_) {
-    for (int axis = 0; axis < 3; ++axis) {
-      std::fill(std::begin(node.lo[axis]), std::end(node.lo[axis]), std::numeric_limits<float>::infinity());
-      std::fill(std::begin(node.hi[axis]), std::end(node.hi[axis]), -std::numeric_limits<float>::infinity());
-    }
-  }
-  for (std::size_t t = 0; t < set->trees_.size(); ++t) {
-    WideBvhNode& node = set->boxes_[t / kWideBvhWidth];
-    const uint32_t k = static_cast<uint32_t>(t % kWideBvhWidth);
-    const Aabb box = tree_bounds(set->trees_[t]);
-    for (int axis = 0; axis < 3; ++axis) {
-      node.lo[axis][k] = box.lo[axis];
-      node.hi[axis][k] = box.hi[axis];
-    }
-    node.child[k] = static_cast<uint32_t>(t);
-    node.leaf_triangles[k] = 1;
-    node.leaf_mask |= static_cast<uint8_t>(1u << k);
-  }
+  std::vector<Aabb> bounds(set->trees_.size());
+  for (std::size_t t = 0; t < bounds.size(); ++t) bounds[t] = tree_bounds(set->trees_[t]);
+  set->top_ = build_wide_top_level(bounds);
   return set;
 }
 
 void BvhBrickSet::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
-  wide_bvh_set_intersect(active_simd_path(), test_, {trees_, boxes_}, ray_ids, rays, hits);
+  wide_bvh_set_intersect(active_simd_path(), test_, {trees_, top_}, ray_ids, rays, hits);
 }
 
 void BvhBrickSet::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
-  wide_bvh_set_occluded(active_simd_path(), test_, {trees_, boxes_}, ray_ids, rays, occluded);
+  wide_bvh_set_occluded(active_simd_path(), test_, {trees_, top_}, ray_ids, rays, occluded);
 }
 
 Expected<std::unique_ptr<ResidentBrickSet>> BvhBrickBuilder::make_resident_set(

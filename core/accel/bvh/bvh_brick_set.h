@@ -1,9 +1,10 @@
 // BvhBrickSet: the resident-set fast path (resident_brick_set.h) for bvh
-// bricks. A ray tests the bricks' boxes (8 at a time) and searches the bricks
-// it enters nearest first with one set of per-ray constants, carrying its
-// best hit from brick to brick; for a scene of one brick that is exactly the
-// brick's own traversal, without the upper-hierarchy walk, the proxies or the
-// per-brick queues. Nothing is copied: the set refers to the bricks' trees.
+// bricks, for any number of them. A ray walks a wide BVH over the bricks'
+// trees (wide_bvh_top_level.h) and searches the bricks it enters nearest
+// first with one set of per-ray constants, carrying its best hit from brick
+// to brick — a two-level BVH, as one BVH over the whole scene would be; for a scene of one brick that is
+// exactly the brick's own traversal, without the upper-hierarchy walk, the proxies or the per-brick queues.
+// Nothing is copied: the set refers to the bricks' trees.
 //
 // Answers are bitwise those of tracing the bricks one by one: the same
 // traversal and triangle test per brick, ties settled by hit_is_better()
@@ -29,8 +30,7 @@ namespace outcore {
 class BvhBrickSet final : public ResidentBrickSet {
  public:
   // Over `bricks` (each non-null, all with the same triangle test; a brick
-  // without triangles adds nothing). INVALID_ARGUMENT beyond
-  // kMaxWideBvhSetTrees bricks with triangles or for mixed tests.
+  // without triangles adds nothing). INVALID_ARGUMENT for mixed tests.
   static Expected<std::unique_ptr<BvhBrickSet>> build(std::span<const BvhBrickAccel* const> bricks);
 
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
@@ -43,7 +43,7 @@ class BvhBrickSet final : public ResidentBrickSet {
 
   TriangleTest test_ = TriangleTest::kWatertight;
   std::vector<WideBvhView> trees_;
-  std::vector<WideBvhNode> boxes_;
+  std::vector<WideBvhNode> top_;
 };
 
 }  // namespace outcore

@@ -78,13 +78,13 @@ struct WideBvhView {
 };
 
 // Several trees traced as one (a resident brick set, bvh_brick_set.h): each
-// ray tests the trees' boxes, then searches the trees it enters nearest
-// first, carrying its best hit from one to the next. boxes holds the trees'
-// bounds in rows of 8, as leaf children whose child index names the tree.
-inline constexpr uint32_t kMaxWideBvhSetTrees = 256;
+// ray walks the top level (wide_bvh_top_level.h), a wide BVH whose leaf
+// children name trees, and searches the trees it enters nearest first,
+// carrying its best hit from one to the next. A set of one tree may have no
+// top level: the tree's root holds the same boxes.
 struct WideBvhSetView {
   std::span<const WideBvhView> trees;
-  std::span<const WideBvhNode> boxes;
+  std::span<const WideBvhNode> top;
 };
 
 struct WideBvh {

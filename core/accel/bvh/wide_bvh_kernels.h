@@ -316,12 +316,13 @@ inline void prefetch_lines(const void* p, std::size_t bytes) {
   for (std::size_t offset = 0; offset < bytes; offset += 64) _mm_prefetch(c + offset, _MM_HINT_T0);
 }
 
-// Visits the leaves whose boxes the segment [tmin, tmax] may touch, nearest
-// entry first. leaf(first_slot, count, tmax) returns true to stop; it may
-// lower tmax.
-template <class V, class Leaf>
-inline void traverse(const WideBvhView& tree, const BoxLanes<V>& box, float tmin, float& tmax, Leaf&& leaf) {
-  if (tree.nodes.empty()) return;
+// Visits the leaves of `nodes` whose boxes the segment [tmin, tmax] may
+// touch, nearest entry first. leaf(ref, count, tmax) returns true to stop; it
+// may lower tmax. prefetch_leaf(ref) asks for a leaf's data when it is pushed.
+template <class V, class Leaf, class PrefetchLeaf>
+inline void traverse_nodes(std::span<const WideBvhNode> nodes, const BoxLanes<V>& box, float tmin,
+                           float& tmax, Leaf&& leaf, PrefetchLeaf&& prefetch_leaf) {
+  if (nodes.empty()) return;
   struct Item {
     uint32_t ref;        // node index, or a leaf's first slot
     uint32_t triangles;  // 0 for a node, else the leaf's count
@@ -332,14 +333,14 @@ inline void traverse(const WideBvhView& tree, const BoxLanes<V>& box, float tmin
   uint32_t top = 0;
   uint32_t index = 0;
   while (true) {
-    const WideBvhNode& node = tree.nodes[index];
+    const WideBvhNode& node = nodes[index];
     alignas(32) float entry[kWideBvhWidth];
     const uint32_t mask = node_box_mask<V>(node, box, tmin, tmax, entry);
     if (mask != 0) {
       const uint32_t first = static_cast<uint32_t>(__builtin_ctz(mask));
       if ((mask & (mask - 1)) == 0 && (node.inner_mask & mask) != 0) {
         index = node.child[first];  // one inner child: no stack traffic
-        prefetch_lines(&tree.nodes[index], sizeof(WideBvhNode));
+        prefetch_lines(&nodes[index], sizeof(WideBvhNode));
         continue;
       }
       // Push the hit children farthest first, so the nearest is on top
@@ -350,9 +351,9 @@ inline void traverse(const WideBvhView& tree, const BoxLanes<V>& box, float tmin
         const uint32_t k = static_cast<uint32_t>(__builtin_ctz(bits));
         const Item item{node.child[k], node.leaf_triangles[k], entry[k]};
         if (item.triangles == 0) {
-          prefetch_lines(&tree.nodes[item.ref], sizeof(WideBvhNode));
+          prefetch_lines(&nodes[item.ref], sizeof(WideBvhNode));
         } else {
-          prefetch_lines(&tree.packets[item.ref / kPacketLanes], sizeof(TrianglePacket));
+          prefetch_leaf(item.ref);
         }
         uint32_t j = top++;
         for (; j > base && stack[j - 1].entry < item.entry; --j) stack[j] = stack[j - 1];
@@ -373,6 +374,14 @@ inline void traverse(const WideBvhView& tree, const BoxLanes<V>& box, float tmin
   }
 }
 
+// traverse_nodes over one tree: leaves are runs of triangle slots.
+template <class V, class Leaf>
+inline void traverse(const WideBvhView& tree, const BoxLanes<V>& box, float tmin, float& tmax, Leaf&& leaf) {
+  traverse_nodes<V>(tree.nodes, box, tmin, tmax, leaf, [&](uint32_t first_slot) {
+    prefetch_lines(&tree.packets[first_slot / kPacketLanes], sizeof(TrianglePacket));
+  });
+}
+
 // The closest hit of one ray, over one tree or several (a brick set): the
 // per-ray constants are prepared once, the best hit carried across trees.
 // As bvh_closest_hit: over (tnear, min(tfar, best.t)], replacing best when a
@@ -384,9 +393,11 @@ class ClosestHitSearch {
       : ray_(ray), best_(best), box_(ray), lanes_(ray), tmax_(ray.tfar < best.t ? ray.tfar : best.t) {}
 
   bool active() const { return tmax_ > ray_.tnear; }
-  float tmax() const { return tmax_; }
+  float tnear() const { return ray_.tnear; }
+  float& tmax() { return tmax_; }
 
-  void search(const WideBvhView& tree) {
+  // Never stops early (false): a nearer hit may lie in a later tree.
+  bool search(const WideBvhView& tree) {
     const TrianglePacket* packets = tree.packets.data();
     traverse(tree, box_, ray_.tnear, tmax_, [&](uint32_t first, uint32_t count, float& limit) {
       for_each_lane_group<V>(packets, first, count,
@@ -411,6 +422,7 @@ class ClosestHitSearch {
                              });
       return false;
     });
+    return false;
   }
 
   // Completes best (barycentrics, normal); whether it changed.
@@ -442,7 +454,8 @@ class AnyHitSearch {
   explicit AnyHitSearch(const Ray& ray) : ray_(ray), box_(ray), lanes_(ray), tmax_(ray.tfar) {}
 
   bool active() const { return tmax_ > ray_.tnear; }
-  float tmax() const { return tmax_; }
+  float tnear() const { return ray_.tnear; }
+  float& tmax() { return tmax_; }
 
   bool search(const WideBvhView& tree) {
     const TrianglePacket* packets = tree.packets.data();
@@ -492,44 +505,25 @@ void occluded_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, c
   }
 }
 
-// The trees of a brick set that a ray's segment may touch, nearest entry
-// first: the set's boxes (rows of 8 in WideBvhNodes whose leaf children name
-// trees) tested kWideBvhWidth at a time.
-template <class V>
-inline uint32_t set_members_in_order(std::span<const WideBvhNode> boxes, const BoxLanes<V>& box, float tmin,
-                                     float tmax, uint32_t* members, float* entries) {
-  uint32_t count = 0;
-  for (const WideBvhNode& node : boxes) {
-    alignas(32) float entry[kWideBvhWidth];
-    for (uint32_t bits = node_box_mask<V>(node, box, tmin, tmax, entry); bits != 0; bits &= bits - 1) {
-      const auto k = static_cast<uint32_t>(__builtin_ctz(bits));
-      uint32_t j = count++;
-      for (; j > 0 && entries[j - 1] > entry[k]; --j) {
-        entries[j] = entries[j - 1];
-        members[j] = members[j - 1];
-      }
-      entries[j] = entry[k];
-      members[j] = node.child[k];
-    }
-  }
-  return count;
+// Searches the trees of a set that the ray may enter, nearest entry first,
+// until search.search(tree) returns true; whether it did.
+template <class V, class Search>
+inline bool search_set(const WideBvhSetView& set, Search& search) {
+  if (set.trees.size() == 1) return search.search(set.trees[0]);  // its root's boxes are the set's
+  bool stopped = false;
+  traverse_nodes<V>(
+      set.top, search.box(), search.tnear(), search.tmax(),
+      [&](uint32_t tree, uint32_t, float&) { return stopped = search.search(set.trees[tree]); },
+      [&](uint32_t tree) { prefetch_lines(set.trees[tree].nodes.data(), sizeof(WideBvhNode)); });
+  return stopped;
 }
 
 template <class V, class Lanes>
 void intersect_set(const WideBvhSetView& set, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
-  uint32_t members[kMaxWideBvhSetTrees];
-  float entries[kMaxWideBvhSetTrees];
   for (const uint32_t i : ray_ids) {
     ClosestHitSearch<V, Lanes> search(rays[i], hits[i]);
     if (!search.active()) continue;
-    if (set.trees.size() == 1) {
-      search.search(set.trees[0]);  // its root's boxes are the set's
-    } else {
-      const uint32_t count =
-          set_members_in_order<V>(set.boxes, search.box(), rays[i].tnear, search.tmax(), members, entries);
-      for (uint32_t m = 0; m < count && entries[m] <= search.tmax(); ++m)
-        search.search(set.trees[members[m]]);
-    }
+    search_set<V>(set, search);
     search.finish();
   }
 }
@@ -537,24 +531,11 @@ void intersect_set(const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
 template <class V, class Lanes>
 void occluded_set(const WideBvhSetView& set, std::span<const uint32_t> ray_ids, const Ray* rays,
                   uint8_t* occluded) {
-  uint32_t members[kMaxWideBvhSetTrees];
-  float entries[kMaxWideBvhSetTrees];
   for (const uint32_t i : ray_ids) {
     if (occluded[i] != 0) continue;
     AnyHitSearch<V, Lanes> search(rays[i]);
     if (!search.active()) continue;
-    if (set.trees.size() == 1) {
-      if (search.search(set.trees[0])) occluded[i] = 1;
-      continue;
-    }
-    const uint32_t count =
-        set_members_in_order<V>(set.boxes, search.box(), rays[i].tnear, search.tmax(), members, entries);
-    for (uint32_t m = 0; m < count; ++m) {
-      if (search.search(set.trees[members[m]])) {
-        occluded[i] = 1;
-        break;
-      }
-    }
+    if (search_set<V>(set, search)) occluded[i] = 1;
   }
 }
 

@@ -66,35 +66,17 @@ class WatertightPacket {
   }
 
   void trace(const WideBvhView& tree) {
-    if (active_ == 0 || tree.nodes.empty()) return;
-    struct Item {
-      uint32_t ref, triangles, lanes;
-      float entry;  // the smallest entry of its lanes
-    };
-    std::array<Item, (kWideBvhWidth - 1) * kMaxBvhDepth + kWideBvhWidth> stack;
-    uint32_t top = 0;
-    stack[top++] = {0, 0, active_, -std::numeric_limits<float>::infinity()};
-    while (top > 0) {
-      const Item item = stack[--top];
-      if (!may_matter(item.lanes, item.entry)) continue;
-      if (item.triangles != 0) {
-        test_leaf(tree.packets.data(), item.ref, item.triangles, item.lanes);
-        continue;
-      }
-      const WideBvhNode& node = tree.nodes[item.ref];
-      const uint32_t base = top;
-      for (uint32_t bits = node.child_mask(); bits != 0; bits &= bits - 1) {
-        const auto k = static_cast<uint32_t>(__builtin_ctz(bits));
-        float entry;
-        const uint32_t lanes = box_lanes(node, k, item.lanes, entry);
-        if (lanes == 0) continue;
-        const Item child{node.child[k], node.leaf_triangles[k], lanes, entry};
-        if (child.triangles == 0) prefetch_lines(&tree.nodes[child.ref], sizeof(WideBvhNode));
-        uint32_t j = top++;
-        for (; j > base && stack[j - 1].entry < child.entry; --j) stack[j] = stack[j - 1];
-        stack[j] = child;
-      }
-    }
+    if (active_ != 0) trace_lanes(tree, active_);
+  }
+
+  // Over the trees of a set, walking its top level with the packet.
+  void trace_set(const WideBvhSetView& set) {
+    if (active_ == 0) return;
+    if (set.trees.size() == 1) return trace_lanes(set.trees[0], active_);
+    walk(
+        set.top, active_,
+        [&](uint32_t tree, uint32_t, uint32_t lanes) { trace_lanes(set.trees[tree], lanes); },
+        [&](uint32_t tree) { prefetch_lines(set.trees[tree].nodes.data(), sizeof(WideBvhNode)); });
   }
 
   // Completes each lane's best (barycentrics, normal).
@@ -109,6 +91,54 @@ class WatertightPacket {
   }
 
  private:
+  void trace_lanes(const WideBvhView& tree, uint32_t lanes) {
+    walk(
+        tree.nodes, lanes,
+        [&](uint32_t first, uint32_t count, uint32_t leaf_lanes) {
+          test_leaf(tree.packets.data(), first, count, leaf_lanes);
+        },
+        [](uint32_t) {});
+  }
+
+  // The packet's walk of `nodes` for `lanes`, nearest entry first:
+  // leaf(ref, count, lanes) for each leaf some lane may still hit.
+  template <class Leaf, class PrefetchLeaf>
+  void walk(std::span<const WideBvhNode> nodes, uint32_t lanes, Leaf&& leaf, PrefetchLeaf&& prefetch_leaf) {
+    if (nodes.empty()) return;
+    struct Item {
+      uint32_t ref, triangles, lanes;
+      float entry;  // the smallest entry of its lanes
+    };
+    std::array<Item, (kWideBvhWidth - 1) * kMaxBvhDepth + kWideBvhWidth> stack;
+    uint32_t top = 0;
+    stack[top++] = {0, 0, lanes, -std::numeric_limits<float>::infinity()};
+    while (top > 0) {
+      const Item item = stack[--top];
+      if (!may_matter(item.lanes, item.entry)) continue;
+      if (item.triangles != 0) {
+        leaf(item.ref, item.triangles, item.lanes);
+        continue;
+      }
+      const WideBvhNode& node = nodes[item.ref];
+      const uint32_t base = top;
+      for (uint32_t bits = node.child_mask(); bits != 0; bits &= bits - 1) {
+        const auto k = static_cast<uint32_t>(__builtin_ctz(bits));
+        float entry;
+        const uint32_t hit_lanes = box_lanes(node, k, item.lanes, entry);
+        if (hit_lanes == 0) continue;
+        const Item child{node.child[k], node.leaf_triangles[k], hit_lanes, entry};
+        if (child.triangles == 0) {
+          prefetch_lines(&nodes[child.ref], sizeof(WideBvhNode));
+        } else {
+          prefetch_leaf(child.ref);
+        }
+        uint32_t j = top++;
+        for (; j > base && stack[j - 1].entry < child.entry; --j) stack[j] = stack[j - 1];
+        stack[j] = child;
+      }
+    }
+  }
+
   // Whether any of `lanes` can still find a hit at or beyond `entry`.
   bool may_matter(uint32_t lanes, float entry) const {
     for (uint32_t bits = lanes; bits != 0; bits &= bits - 1) {
@@ -211,8 +241,8 @@ inline uint32_t packet_run(std::span<const uint32_t> ray_ids, std::size_t start,
 }
 
 // Closest hits with the watertight test: packets where rays form runs of at
-// least half a packet, single rays elsewhere. trees: one tree, or the trees of
-// a set with their boxes.
+// least half a packet, single rays elsewhere; over one tree (a set of one,
+// without top level) or a brick set.
 template <class V>
 void intersect_watertight_coherent(const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
                                    const Ray* rays, Hit* hits) {
@@ -221,19 +251,10 @@ void intersect_watertight_coherent(const WideBvhSetView& set, std::span<const ui
   while (i < ray_ids.size()) {
     const uint32_t run = packet_run<kWidth>(ray_ids, i, rays);
     if (run * 2 < kWidth) {
-      for (uint32_t k = 0; k < run; ++k) {
-        const std::span<const uint32_t> one = ray_ids.subspan(i + k, 1);
-        if (set.trees.size() == 1) {
-          intersect_rays<V, WatertightLanes<V>>(set.trees[0], one, rays, hits);
-        } else {
-          intersect_set<V, WatertightLanes<V>>(set, one, rays, hits);
-        }
-      }
+      intersect_set<V, WatertightLanes<V>>(set, ray_ids.subspan(i, run), rays, hits);
     } else {
       WatertightPacket<V> packet(rays, ray_ids.data() + i, run, hits);
-      // Trees in order; each lane's best carries over, so the order only
-      // changes how much is pruned, never an answer.
-      for (const WideBvhView& tree : set.trees) packet.trace(tree);
+      packet.trace_set(set);
       packet.finish();
     }
     i += run;

@@ -22,6 +22,7 @@
 #include "core/accel/bvh/mt_triangle_test.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
 #include "core/accel/bvh/wide_bvh_collapse.h"
+#include "core/accel/bvh/wide_bvh_top_level.h"
 #include "core/accel/bvh/wide_bvh_trace.h"
 
 namespace outcore {
@@ -237,6 +238,68 @@ TEST(WideBvh, CameraRunsTracedAsPacketsMatchTheScalarReference) {
   const BrickData sphere = load_brick_from("gen:sphere?level=4");
   const std::vector<Ray> inside = camera_rays(sphere, side, Vec3f(0.01f, 0.02f, 0.03f));  // from inside
   expect_paths_match_reference("sphere from inside", build_trees(sphere), inside, inside.size() / 2);
+}
+
+// A set of many trees (the bunny cut into slabs, one tree each) walked
+// through its top level answers bitwise as the trees traced one after the
+// other with the best hit carried: every path, every test, camera runs and
+// single rays.
+TEST(WideBvh, ASetOfManyTreesAnswersAsItsTreesOneByOne) {
+  const BrickData bunny = load_brick_from(accel_test::bunny_path());
+  std::vector<std::size_t> order(bunny.triangles.size());
+  for (std::size_t k = 0; k < order.size(); ++k) order[k] = k;
+  const auto centre_x = [&](std::size_t k) {
+    const Triangle& t = bunny.triangles[k];
+    return t.v0.x + t.v1.x + t.v2.x;
+  };
+  std::sort(order.begin(), order.end(),
+            [&](std::size_t a, std::size_t b) { return centre_x(a) < centre_x(b); });
+  constexpr std::size_t kSlabs = 300;
+  std::vector<WideBvh> trees;
+  std::vector<WideBvhView> views;
+  std::vector<Aabb> bounds;
+  for (std::size_t s = 0; s < kSlabs; ++s) {
+    BrickData slab;
+    for (std::size_t j = s * order.size() / kSlabs; j < (s + 1) * order.size() / kSlabs; ++j) {
+      slab.triangles.push_back(bunny.triangles[order[j]]);
+      slab.ids.push_back(bunny.ids[order[j]]);
+    }
+    trees.push_back(build_trees(slab).wide);
+    bounds.push_back(bounds_of(slab));
+  }
+  for (const WideBvh& tree : trees) views.push_back(tree.view());
+  const std::vector<WideBvhNode> top = build_wide_top_level(bounds);
+  const WideBvhSetView set{views, top};
+
+  const float reach = length(bounds_of(bunny).extent());
+  std::vector<Ray> rays = camera_rays(bunny, 48, Vec3f(0.1f, 0.2f, 2 * reach));
+  const std::vector<Ray> mixed = mixed_rays(bunny, kRays / 2, 21);
+  rays.insert(rays.end(), mixed.begin(), mixed.end());
+  const std::vector<uint32_t> ids = all_ids(rays.size());
+  for (const TriangleTest test : kAllTriangleTests) {
+    for (const SimdPath path : supported_paths()) {
+      const std::string name =
+          std::string(triangle_test_name(test)) + " " + std::string(simd_path_name(path));
+      std::vector<Hit> want(rays.size()), got(rays.size());
+      std::vector<uint8_t> want_occluded(rays.size(), 0), got_occluded(rays.size(), 0);
+      for (const WideBvhView& tree : views) {
+        wide_bvh_intersect(path, test, tree, ids, rays.data(), want.data());
+        wide_bvh_occluded(path, test, tree, ids, rays.data(), want_occluded.data());
+      }
+      wide_bvh_set_intersect(path, test, set, ids, rays.data(), got.data());
+      wide_bvh_set_occluded(path, test, set, ids, rays.data(), got_occluded.data());
+      std::size_t differ = 0, hits = 0;
+      for (std::size_t i = 0; i < rays.size(); ++i) {
+        hits += want[i].is_hit();
+        if (std::memcmp(&got[i], &want[i], sizeof(Hit)) != 0 && differ++ < 5) {
+          ADD_FAILURE() << name << " ray " << i << ": t " << got[i].t << " vs " << want[i].t;
+        }
+      }
+      EXPECT_EQ(differ, 0u) << name;
+      EXPECT_GT(hits, rays.size() / 10) << name;
+      EXPECT_EQ(got_occluded, want_occluded) << name;
+    }
+  }
 }
 
 TEST(WideBvh, LeavesOfEveryShapeAndSize) {

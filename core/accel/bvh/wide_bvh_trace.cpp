@@ -60,14 +60,14 @@ void wide_bvh_occluded(SimdPath path, TriangleTest test, const WideBvhView& tree
 
 void wide_bvh_set_intersect(SimdPath path, TriangleTest test, const WideBvhSetView& set,
                             std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
-  if (set.boxes.empty()) return;
+  if (set.trees.empty()) return;
   if (path == SimdPath::kAvx2) return wide_avx2::set_intersect(test, set, ray_ids, rays, hits);
   wide_sse4::set_intersect(test, set, ray_ids, rays, hits);
 }
 
 void wide_bvh_set_occluded(SimdPath path, TriangleTest test, const WideBvhSetView& set,
                            std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) {
-  if (set.boxes.empty()) return;
+  if (set.trees.empty()) return;
   if (path == SimdPath::kAvx2) return wide_avx2::set_occluded(test, set, ray_ids, rays, occluded);
   wide_sse4::set_occluded(test, set, ray_ids, rays, occluded);
 }
