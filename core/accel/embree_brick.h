@@ -210,9 +210,8 @@ class EmbreeBrickBuilder final : public BrickBuilder {
   }
   const std::string& name() const override;
   // The resident bricks in one Embree scene (EmbreeBrickSet; defined in
-  // embree_brick_set.cpp), made per batch: worth it for a few bricks
-  // (docs/BENCHMARKS.md, the chunked strategies).
-  uint32_t resident_set_max_bricks() const override { return 16; }
+  // embree_brick_set.cpp), made per batch.
+  uint32_t resident_set_max_bricks() const override { return kResidentSetMaxBricks; }
   Expected<std::unique_ptr<ResidentBrickSet>> make_resident_set(
       std::span<const BrickAccel* const> bricks) const override;
   const EmbreeBrickConfig& config() const { return config_; }

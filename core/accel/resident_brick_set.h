@@ -22,6 +22,12 @@
 
 namespace outcore {
 
+// The most bricks a set is offered for by the structures that have one
+// (BrickBuilder::resident_set_max_bricks): beyond a few, queueing rays brick
+// by brick, which finds each brick's structure in cache, was faster for both
+// (docs/BENCHMARKS.md, issue 23).
+inline constexpr uint32_t kResidentSetMaxBricks = 16;
+
 class ResidentBrickSet {
  public:
   virtual ~ResidentBrickSet() = default;

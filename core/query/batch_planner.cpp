@@ -10,6 +10,8 @@ std::string_view why_no_set(const QueryOptions& options, const BatchFacts& facts
   if (facts.resident_set_max_bricks == 0)
     return "every brick resident, few bricks; the brick structure offers no resident set";
   if (facts.brick_count == 0) return "every brick resident, few bricks; the scene has no bricks";
+  if (facts.brick_count > facts.resident_set_max_bricks)
+    return "every brick resident, few bricks; more than the structure's resident set serves";
   return "every brick resident, few bricks; the batch is below brick_set_min_rays";
 }
 

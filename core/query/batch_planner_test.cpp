@@ -65,6 +65,13 @@ TEST(BatchPlanner, WithoutTheSetAResidentSceneOfFewBricksIsSwept) {
   EXPECT_EQ(plan.strategy, BatchStrategy::kInCacheSweep);
   EXPECT_NE(plan.reason.find("offers no resident set"), std::string_view::npos) << plan.reason;
 
+  BatchFacts beyond = open_facts();
+  beyond.resident_set_max_bricks = beyond.brick_count - 1;
+  plan = plan_batch(QueryOptions{}, beyond);
+  EXPECT_EQ(plan.strategy, BatchStrategy::kInCacheSweep);
+  EXPECT_NE(plan.reason.find("more than the structure's resident set serves"), std::string_view::npos)
+      << plan.reason;
+
   BatchFacts small = open_facts();
   small.rays = QueryOptions{}.brick_set_min_rays - 1;
   plan = plan_batch(QueryOptions{}, small);

@@ -120,10 +120,9 @@ class BvhBrickBuilder final : public BrickBuilder {
     return config_.triangle_test == TriangleTest::kMt ? kMollerTrumboreHitRounding : kWatertightHitRounding;
   }
   // The resident bricks as one structure (BvhBrickSet; defined in
-  // bvh_brick_set.cpp), a two-level BVH. It serves any number of bricks, but
-  // beyond a few the queued strategy is faster: rays queued brick by brick
-  // find each brick's tree in cache (docs/BENCHMARKS.md, issue 23).
-  uint32_t resident_set_max_bricks() const override { return 16; }
+  // bvh_brick_set.cpp), a two-level BVH: it would serve any number of
+  // bricks, but is offered for kResidentSetMaxBricks.
+  uint32_t resident_set_max_bricks() const override { return kResidentSetMaxBricks; }
   Expected<std::unique_ptr<ResidentBrickSet>> make_resident_set(
       std::span<const BrickAccel* const> bricks) const override;
   const BvhBrickConfig& config() const { return config_; }

@@ -1,8 +1,7 @@
 #include "core/accel/bvh/bvh_brick_set.h"
 
-#include <algorithm>
-#include <limits>
 #include <string>
+#include <vector>
 
 #include "core/accel/bvh/wide_bvh_top_level.h"
 #include "core/accel/bvh/wide_bvh_trace.h"
@@ -15,9 +14,7 @@ Aabb tree_bounds(const WideBvhView& tree) {
   Aabb box;
   const WideBvhNode& root = tree.nodes[0];
   for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
-    if ((root.child_mask() >> k & 1) == 0) continue;
-    box.extend(
-        Aabb{{root.lo[0][k], root.lo[1][k], root.lo[2][k]}, {root.hi[0][k], root.hi[1][k], root.hi[2][k]}});
+    if (root.child_mask() >> k & 1) box.extend(root.box(k));
   }
   return box;
 }

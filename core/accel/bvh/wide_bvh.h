@@ -21,11 +21,15 @@
 // many threads.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
+#include <iterator>
+#include <limits>
 #include <span>
 #include <vector>
 
 #include "core/accel/bvh/bvh_tree.h"
+#include "core/geometry/aabb.h"
 #include "core/geometry/triangle.h"
 #include "core/util/status.h"
 
@@ -48,6 +52,23 @@ struct alignas(64) WideBvhNode {
   uint8_t reserved[22];
 
   uint8_t child_mask() const { return static_cast<uint8_t>(inner_mask | leaf_mask); }
+
+  // A node whose eight slots are empty (no child yet).
+  static WideBvhNode empty() {
+    WideBvhNode node{};
+    for (int axis = 0; axis < 3; ++axis) {
+      std::fill(std::begin(node.lo[axis]), std::end(node.lo[axis]), std::numeric_limits<float>::infinity());
+      std::fill(std::begin(node.hi[axis]), std::end(node.hi[axis]), -std::numeric_limits<float>::infinity());
+    }
+    return node;
+  }
+  Aabb box(uint32_t k) const { return {{lo[0][k], lo[1][k], lo[2][k]}, {hi[0][k], hi[1][k], hi[2][k]}}; }
+  void set_box(uint32_t k, const Aabb& box) {
+    for (int axis = 0; axis < 3; ++axis) {
+      lo[axis][k] = box.lo[axis];
+      hi[axis][k] = box.hi[axis];
+    }
+  }
 };
 static_assert(sizeof(WideBvhNode) == 256);
 

@@ -182,17 +182,10 @@ class Collapse {
     std::array<Candidate, kWideBvhWidth> kids;
     const uint32_t count = choose_children(binary, kids);
     std::array<uint32_t, kWideBvhWidth> inner_index{};
-    WideBvhNode node{};
-    for (int axis = 0; axis < 3; ++axis) {
-      std::fill(std::begin(node.lo[axis]), std::end(node.lo[axis]), std::numeric_limits<float>::infinity());
-      std::fill(std::begin(node.hi[axis]), std::end(node.hi[axis]), -std::numeric_limits<float>::infinity());
-    }
+    WideBvhNode node = WideBvhNode::empty();
     for (uint32_t k = 0; k < count; ++k) {
       const Candidate& kid = kids[k];
-      for (int axis = 0; axis < 3; ++axis) {
-        node.lo[axis][k] = kid.box.lo[axis];
-        node.hi[axis][k] = kid.box.hi[axis];
-      }
+      node.set_box(k, kid.box);
       if (kid.leaf) {
         assert(kid.triangles >= 1 && kid.triangles <= 255);
         const uint64_t first = allocate_slots(kid.triangles);

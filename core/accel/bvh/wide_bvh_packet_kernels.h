@@ -65,11 +65,8 @@ class WatertightPacket {
     tnear_ = V::load(tnear);
   }
 
-  void trace(const WideBvhView& tree) {
-    if (active_ != 0) trace_lanes(tree, active_);
-  }
-
-  // Over the trees of a set, walking its top level with the packet.
+  // Over one tree (a set of one) or the trees of a set, walking its top
+  // level with the packet.
   void trace_set(const WideBvhSetView& set) {
     if (active_ == 0) return;
     if (set.trees.size() == 1) return trace_lanes(set.trees[0], active_);

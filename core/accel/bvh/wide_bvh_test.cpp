@@ -342,8 +342,7 @@ TEST(WideBvh, CollapseKeepsEveryTriangleOnceInsideItsBoxes) {
       stack.pop_back();
       const WideBvhNode& node = wide.nodes[item.node];
       for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
-        Aabb box{{node.lo[0][k], node.lo[1][k], node.lo[2][k]},
-                 {node.hi[0][k], node.hi[1][k], node.hi[2][k]}};
+        const Aabb box = node.box(k);
         if ((node.child_mask() >> k & 1) == 0) {
           EXPECT_TRUE(box.empty()) << "empty child slot " << k;
           continue;

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <limits>
 
 namespace outcore {
 namespace {
@@ -53,19 +52,12 @@ class TopLevelBuild {
       *largest = left;
       groups.push_back(right);
     }
-    WideBvhNode node{};
-    for (int axis = 0; axis < 3; ++axis) {
-      std::fill(std::begin(node.lo[axis]), std::end(node.lo[axis]), std::numeric_limits<float>::infinity());
-      std::fill(std::begin(node.hi[axis]), std::end(node.hi[axis]), -std::numeric_limits<float>::infinity());
-    }
+    WideBvhNode node = WideBvhNode::empty();
     for (uint32_t k = 0; k < groups.size(); ++k) {
       const Range g = groups[k];
       Aabb box;
       for (uint32_t i = g.first; i < g.first + g.count; ++i) box.extend(boxes_[order_[i]]);
-      for (int axis = 0; axis < 3; ++axis) {
-        node.lo[axis][k] = box.lo[axis];
-        node.hi[axis][k] = box.hi[axis];
-      }
+      node.set_box(k, box);
       if (g.count == 1) {
         node.child[k] = order_[g.first];
         node.leaf_triangles[k] = 1;

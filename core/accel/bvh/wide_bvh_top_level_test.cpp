@@ -8,10 +8,6 @@
 namespace outcore {
 namespace {
 
-Aabb child_box(const WideBvhNode& node, uint32_t k) {
-  return {{node.lo[0][k], node.lo[1][k], node.lo[2][k]}, {node.hi[0][k], node.hi[1][k], node.hi[2][k]}};
-}
-
 // Walks the tree: each non-empty box is a leaf exactly once, under boxes that
 // hold it; children follow their parent; empty slots are in no mask.
 void expect_well_formed(const std::vector<WideBvhNode>& nodes, const std::vector<Aabb>& boxes) {
@@ -25,7 +21,7 @@ void expect_well_formed(const std::vector<WideBvhNode>& nodes, const std::vector
     const WideBvhNode& node = nodes.at(index);
     EXPECT_EQ(node.inner_mask & node.leaf_mask, 0);
     for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
-      const Aabb box = child_box(node, k);
+      const Aabb box = node.box(k);
       if ((node.child_mask() >> k & 1) == 0) {
         EXPECT_TRUE(box.empty()) << "an unused slot has an empty box";
         continue;
@@ -41,7 +37,7 @@ void expect_well_formed(const std::vector<WideBvhNode>& nodes, const std::vector
         const WideBvhNode& inner = nodes.at(node.child[k]);
         for (uint32_t j = 0; j < kWideBvhWidth; ++j) {
           if (inner.child_mask() >> j & 1) {
-            EXPECT_TRUE(box.contains(child_box(inner, j)));
+            EXPECT_TRUE(box.contains(inner.box(j)));
           }
         }
         pending.push_back(node.child[k]);
