@@ -319,9 +319,10 @@ inline void prefetch_lines(const void* p, std::size_t bytes) {
 // Visits the leaves of `nodes` whose boxes the segment [tmin, tmax] may
 // touch, nearest entry first. leaf(ref, count, tmax) returns true to stop; it
 // may lower tmax. prefetch_leaf(ref) asks for a leaf's data when it is pushed.
+// The walk starts at node `root` (a subtree; 0 for the whole tree).
 template <class V, class Leaf, class PrefetchLeaf>
 inline void traverse_nodes(std::span<const WideBvhNode> nodes, const BoxLanes<V>& box, float tmin,
-                           float& tmax, Leaf&& leaf, PrefetchLeaf&& prefetch_leaf) {
+                           float& tmax, Leaf&& leaf, PrefetchLeaf&& prefetch_leaf, uint32_t root = 0) {
   if (nodes.empty()) return;
   struct Item {
     uint32_t ref;        // node index, or a leaf's first slot
@@ -331,7 +332,7 @@ inline void traverse_nodes(std::span<const WideBvhNode> nodes, const BoxLanes<V>
   // Each level leaves at most 7 siblings pending, and depth <= kMaxBvhDepth.
   std::array<Item, (kWideBvhWidth - 1) * kMaxBvhDepth + kWideBvhWidth> stack;
   uint32_t top = 0;
-  uint32_t index = 0;
+  uint32_t index = root;
   while (true) {
     const WideBvhNode& node = nodes[index];
     alignas(32) float entry[kWideBvhWidth];
@@ -376,10 +377,14 @@ inline void traverse_nodes(std::span<const WideBvhNode> nodes, const BoxLanes<V>
 
 // traverse_nodes over one tree: leaves are runs of triangle slots.
 template <class V, class Leaf>
-inline void traverse(const WideBvhView& tree, const BoxLanes<V>& box, float tmin, float& tmax, Leaf&& leaf) {
-  traverse_nodes<V>(tree.nodes, box, tmin, tmax, leaf, [&](uint32_t first_slot) {
-    prefetch_lines(&tree.packets[first_slot / kPacketLanes], sizeof(TrianglePacket));
-  });
+inline void traverse(const WideBvhView& tree, const BoxLanes<V>& box, float tmin, float& tmax, Leaf&& leaf,
+                     uint32_t root = 0) {
+  traverse_nodes<V>(
+      tree.nodes, box, tmin, tmax, leaf,
+      [&](uint32_t first_slot) {
+        prefetch_lines(&tree.packets[first_slot / kPacketLanes], sizeof(TrianglePacket));
+      },
+      root);
 }
 
 // The closest hit of one ray, over one tree or several (a brick set): the
@@ -396,32 +401,36 @@ class ClosestHitSearch {
   float tnear() const { return ray_.tnear; }
   float& tmax() { return tmax_; }
 
-  // Never stops early (false): a nearer hit may lie in a later tree.
-  bool search(const WideBvhView& tree) {
+  // Never stops early (false): a nearer hit may lie in a later tree. From
+  // node `root`: a subtree only.
+  bool search(const WideBvhView& tree, uint32_t root = 0) {
     const TrianglePacket* packets = tree.packets.data();
-    traverse(tree, box_, ray_.tnear, tmax_, [&](uint32_t first, uint32_t count, float& limit) {
-      for_each_lane_group<V>(packets, first, count,
-                             [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
-                               for (uint32_t bits = lanes_.candidates(packet, lane, valid, ray_.tnear, limit);
-                                    bits != 0; bits &= bits - 1) {
-                                 const uint32_t bit = static_cast<uint32_t>(__builtin_ctz(bits));
-                                 TriangleHit h;
-                                 if (!lanes_.accept(packet, lane, bit, h)) continue;
-                                 const uint32_t geometry_id = packet.geometry_id[lane + bit];
-                                 const uint32_t primitive_id = packet.primitive_id[lane + bit];
-                                 if (!hit_is_better(h.t, geometry_id, primitive_id, best_)) continue;
-                                 best_.t = h.t;
-                                 best_.geometry_id = geometry_id;
-                                 best_.primitive_id = primitive_id;
-                                 found_packet_ = &packet;
-                                 found_lane_ = lane + bit;
-                                 found_hit_ = h;
-                                 limit = h.t;  // inclusive: a tie at h.t may still win on its id
-                               }
-                               return false;
-                             });
-      return false;
-    });
+    traverse(
+        tree, box_, ray_.tnear, tmax_,
+        [&](uint32_t first, uint32_t count, float& limit) {
+          for_each_lane_group<V>(
+              packets, first, count, [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
+                for (uint32_t bits = lanes_.candidates(packet, lane, valid, ray_.tnear, limit); bits != 0;
+                     bits &= bits - 1) {
+                  const uint32_t bit = static_cast<uint32_t>(__builtin_ctz(bits));
+                  TriangleHit h;
+                  if (!lanes_.accept(packet, lane, bit, h)) continue;
+                  const uint32_t geometry_id = packet.geometry_id[lane + bit];
+                  const uint32_t primitive_id = packet.primitive_id[lane + bit];
+                  if (!hit_is_better(h.t, geometry_id, primitive_id, best_)) continue;
+                  best_.t = h.t;
+                  best_.geometry_id = geometry_id;
+                  best_.primitive_id = primitive_id;
+                  found_packet_ = &packet;
+                  found_lane_ = lane + bit;
+                  found_hit_ = h;
+                  limit = h.t;  // inclusive: a tie at h.t may still win on its id
+                }
+                return false;
+              });
+          return false;
+        },
+        root);
     return false;
   }
 

@@ -240,6 +240,43 @@ TEST(WideBvh, CameraRunsTracedAsPacketsMatchTheScalarReference) {
   expect_paths_match_reference("sphere from inside", build_trees(sphere), inside, inside.size() / 2);
 }
 
+// Packets culled by their whole-packet bounds (interval and slope) and
+// packets whose large boxes skip the lane-by-lane test must still find every
+// vertex and edge hit: runs of eight rays from one interior point, each run
+// aimed at the vertices and edge midpoints of neighbouring triangles of a
+// closed sphere, near the origin and at offsets up to 1e6 (the sphere
+// scaled with the offset so that its triangles stay usable in float).
+TEST(WideBvh, PacketsAimedAtVerticesAndEdgesOfAClosedMeshLeakNothingAtAnyOffset) {
+  for (const float offset : {0.0f, 1e3f, 1e6f}) {
+    BrickData sphere = load_brick_from("gen:sphere?level=3");
+    const float scale = std::max(1.0f, offset * 1e-3f);
+    for (Triangle& tri : sphere.triangles) {
+      for (Vec3f* v : {&tri.v0, &tri.v1, &tri.v2}) *v = *v * scale + Vec3f(offset, -0.5f * offset, offset);
+    }
+    const Vec3f interior = bounds_of(sphere).center() + Vec3f(0.01f, 0.02f, -0.03f) * scale;
+    std::vector<Ray> rays;
+    for (const Triangle& tri : sphere.triangles) {
+      for (const Vec3f& target : {tri.v0, tri.v1, tri.v2, (tri.v0 + tri.v1) * 0.5f, (tri.v1 + tri.v2) * 0.5f,
+                                  (tri.v2 + tri.v0) * 0.5f, (tri.v0 + tri.v1 + tri.v2) / 3.0f, tri.v0}) {
+        Ray ray;
+        ray.origin = interior;
+        ray.direction = target - interior;
+        rays.push_back(ray);
+      }
+    }
+    const std::string what = "packets aimed at a sphere +" + std::to_string(offset);
+    const Trees trees = build_trees(sphere);
+    expect_paths_match_reference(what, trees, rays, rays.size() / 2);  // mt may leak; watertight below
+    for (const SimdPath path : supported_paths()) {
+      std::vector<Hit> got(rays.size());
+      wide_bvh_intersect(path, TriangleTest::kWatertight, trees.wide.view(), all_ids(rays.size()),
+                         rays.data(), got.data());
+      const auto leaks = std::count_if(got.begin(), got.end(), [](const Hit& h) { return !h.is_hit(); });
+      EXPECT_EQ(leaks, 0) << what << " " << simd_path_name(path);
+    }
+  }
+}
+
 // A set of many trees (the bunny cut into slabs, one tree each) walked
 // through its top level answers bitwise as the trees traced one after the
 // other with the best hit carried: every path, every test, camera runs and
