@@ -6,6 +6,7 @@
 
 #include "core/accel/bvh/bvh_brick.h"
 #include "core/accel/embree_brick.h"
+#include "core/accel/kdtree/kd_tree_brick.h"
 #include "core/accel/reference_brick.h"
 
 namespace outcore {
@@ -64,17 +65,23 @@ bool parse_number(const std::string& text, T& out) {
 // ties, at a modest cost over mt (docs/ACCURACY.md); mt leaks at vertices,
 // double is the slower accuracy reference. The builder defaults are in
 // BinnedSahBuilder::Config.
+// The triangle_test option of the structures that take one.
+Status parse_triangle_test(const std::string& structure, const std::string& value, TriangleTest& out) {
+  const auto test = triangle_test_from_name(value);
+  if (!test) {
+    return invalid_argument("brick accel " + structure +
+                            ": option triangle_test must be mt, watertight or double, got '" + value + "'");
+  }
+  out = *test;
+  return Status::Ok();
+}
+
 Expected<std::unique_ptr<BrickBuilder>> make_bvh_builder(const BrickAccelOptions& options) {
   BvhBrickConfig config;
   BinnedSahBuilder::Config& b = config.builder;
   for (const auto& [key, value] : options) {
     if (key == "triangle_test") {
-      const auto test = triangle_test_from_name(value);
-      if (!test) {
-        return invalid_argument(
-            "brick accel bvh: option triangle_test must be mt, watertight or double, got '" + value + "'");
-      }
-      config.triangle_test = *test;
+      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("bvh", value, config.triangle_test));
     } else if (key == "bins" || key == "max_leaf_size") {
       uint32_t number = 0;
       if (!parse_number(value, number)) {
@@ -99,6 +106,38 @@ Expected<std::unique_ptr<BrickBuilder>> make_bvh_builder(const BrickAccelOptions
   return std::unique_ptr<BrickBuilder>(new BvhBrickBuilder(config));
 }
 
+// Defaults: watertight (as the bvh) and KdTreeBuilder::Config's constants.
+Expected<std::unique_ptr<BrickBuilder>> make_kdtree_builder(const BrickAccelOptions& options) {
+  KdTreeBrickConfig config;
+  KdTreeBuilder::Config& b = config.builder;
+  for (const auto& [key, value] : options) {
+    if (key == "triangle_test") {
+      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("kdtree", value, config.triangle_test));
+    } else if (key == "max_depth") {
+      if (!parse_number(value, b.max_depth)) {
+        return invalid_argument("brick accel kdtree: option max_depth must be a whole number, got '" + value +
+                                "'");
+      }
+    } else if (key == "traversal_cost" || key == "intersection_cost" || key == "empty_bonus") {
+      float number = 0;
+      if (!parse_number(value, number) || !std::isfinite(number)) {
+        return invalid_argument("brick accel kdtree: option " + key + " must be a number, got '" + value +
+                                "'");
+      }
+      (key == "traversal_cost"      ? b.traversal_cost
+       : key == "intersection_cost" ? b.intersection_cost
+                                    : b.empty_bonus) = number;
+    } else {
+      return invalid_argument("brick accel kdtree: unknown option '" + key +
+                              "' (known: triangle_test, traversal_cost, intersection_cost, empty_bonus, "
+                              "max_depth)");
+    }
+  }
+  const Status valid = b.validate();
+  if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
+  return std::unique_ptr<BrickBuilder>(new KdTreeBrickBuilder(config));
+}
+
 Expected<std::unique_ptr<BrickBuilder>> make_reference_builder(const BrickAccelOptions& options) {
   if (!options.empty()) {
     return invalid_argument("brick accel reference: unknown option '" + options.begin()->first +
@@ -116,6 +155,7 @@ struct BrickStructureEntry {
 constexpr BrickStructureEntry kBrickStructures[] = {
     {"embree", make_embree_builder},
     {"bvh", make_bvh_builder},
+    {"kdtree", make_kdtree_builder},
     {"reference", make_reference_builder},
 };
 

@@ -1,4 +1,4 @@
-// Creates brick structures by name ("embree", "bvh", "reference") with options
+// Creates brick structures by name ("embree", "bvh", "kdtree", "reference") with options
 // given as key=value strings; unknown names and unknown or malformed options
 // are errors, never ignored. The returned BrickBuilder turns a loaded brick into
 // a BrickAccel.
@@ -61,7 +61,9 @@ inline constexpr const char* kDefaultBrickAccel = "bvh";
 // Names: "embree" (options: robust=0|1, quality=low|medium|high); "bvh"
 // (options: triangle_test=mt|watertight|double, default watertight; bins,
 // max_leaf_size, traversal_cost, intersection_cost: BinnedSahBuilder::Config);
-// "reference" (no options: float64 brute force per brick, reference_brick.h).
+// "kdtree" (options: triangle_test as bvh; traversal_cost, intersection_cost,
+// empty_bonus, max_depth: KdTreeBuilder::Config); "reference" (no options:
+// float64 brute force per brick, reference_brick.h).
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options);
 std::vector<std::string> brick_accel_names();

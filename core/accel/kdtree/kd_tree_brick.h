@@ -1,0 +1,91 @@
+// KdTreeBrickAccel: a brick's triangles in an SAH kd-tree (kd_tree_builder.h)
+// traced by the front-to-back stack walk (kd_tree_traversal.h) with the
+// triangle test chosen by name, and KdTreeBrickBuilder, the BrickBuilder that
+// makes them (registered as "kdtree" in brick_accel_factory.cpp).
+//
+// Hits follow the bvh brick's contract (bvh_brick.h): tnear < t <= tfar, the
+// user's ids, Embree's barycentrics, the float64 normal rounded, ties to the
+// smaller (geometry_id, primitive_id); degenerate or non-finite triangles are
+// left out. No serializer yet: kd-tree bricks are rebuilt, not kept in the
+// subtree tier.
+//
+// Memory: memory_bytes() = the tree's arrays (8 B per node, 4 B per
+// reference, 56 B per triangle) + kOverheadBytes; reserve_bytes(n) bounds it
+// and the build's peak (the builder caps references at
+// KdTreeBuilder::kMaxReferencesPerTriangle per triangle).
+//
+// Thread-safety: build() may run on many threads at once; a built accel is
+// immutable and intersect() / occluded() may run concurrently.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "core/accel/brick_accel_factory.h"
+#include "core/accel/bvh/triangle_test_kind.h"
+#include "core/accel/kdtree/kd_tree.h"
+#include "core/accel/kdtree/kd_tree_builder.h"
+#include "core/store/brick_data.h"
+
+namespace outcore {
+
+struct KdTreeBrickConfig {
+  TriangleTest triangle_test = TriangleTest::kWatertight;
+  KdTreeBuilder::Config builder;
+};
+
+class KdTreeBrickAccel final : public BrickAccel {
+ public:
+  // Node indices and reference counts must fit 30 bits (kMaxKdIndex) under
+  // the builder's budgets (16 nodes a triangle at most).
+  static constexpr uint64_t kMaxTriangles = 1u << 24;
+  static constexpr uint64_t kOverheadBytes = 8192;
+
+  // Consumes the brick. INVALID_ARGUMENT when ids and triangles differ in
+  // count or the config is invalid, OUT_OF_RANGE beyond kMaxTriangles.
+  static Expected<std::unique_ptr<KdTreeBrickAccel>> build(BrickData&& brick,
+                                                           const KdTreeBrickConfig& config);
+  static uint64_t reserve_bytes(uint64_t triangle_count);
+
+  void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
+  void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
+
+  uint64_t memory_bytes() const override { return tree_.memory_bytes() + kOverheadBytes; }
+  double build_seconds() const override { return build_seconds_; }
+  uint32_t triangle_count() const override { return triangle_count_; }
+
+  // Beyond BrickAccel (statistics and tests):
+  KdTreeView view() const { return tree_.view(); }
+  uint64_t build_peak_bytes() const { return build_peak_bytes_; }
+
+ private:
+  KdTreeBrickAccel() = default;
+
+  KdTree tree_;
+  TriangleTest test_ = TriangleTest::kWatertight;
+  uint32_t triangle_count_ = 0;  // including the degenerate ones left out
+  uint64_t build_peak_bytes_ = 0;
+  double build_seconds_ = 0;
+};
+
+class KdTreeBrickBuilder final : public BrickBuilder {
+ public:
+  explicit KdTreeBrickBuilder(const KdTreeBrickConfig& config) : config_(config) {}
+
+  Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override;
+  uint64_t reserve_bytes(uint32_t triangle_count) const override {
+    return KdTreeBrickAccel::reserve_bytes(triangle_count);
+  }
+  const std::string& name() const override;
+  double hit_rounding_scale() const override {
+    return config_.triangle_test == TriangleTest::kMt ? kMollerTrumboreHitRounding : kWatertightHitRounding;
+  }
+  const KdTreeBrickConfig& config() const { return config_; }
+
+ private:
+  KdTreeBrickConfig config_;
+};
+
+}  // namespace outcore

@@ -1,0 +1,318 @@
+// The kd-tree against brute force with the same triangle test (bitwise: the
+// walk may only change which triangles are tested, never the answer), on
+// generated scenes, soups, the bunny, rays aimed at a closed mesh's vertices
+// and edges from inside at offsets up to 1e6 (0 leaks with the watertight
+// test), and rays lying in or crossing exactly at the tree's split planes; the
+// walk itself on a hand-built tree (the order of cells, the stack, and a
+// triangle spanning two cells that must not end the walk early); the build's
+// structure (validate, every triangle referenced, budgets) and the factory.
+#include "core/accel/kdtree/kd_tree.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "core/accel/accel_test_util.h"
+#include "core/accel/brick_accel_factory.h"
+#include "core/accel/bvh/double_triangle_test.h"
+#include "core/accel/bvh/mt_triangle_test.h"
+#include "core/accel/bvh/watertight_triangle_test.h"
+#include "core/accel/kdtree/kd_tree_brick.h"
+#include "core/accel/kdtree/kd_tree_builder.h"
+#include "core/accel/kdtree/kd_tree_traversal.h"
+
+namespace outcore {
+namespace {
+
+using accel_test::bounds_of;
+using accel_test::load_brick_from;
+
+#ifdef OUTCORE_SANITIZE_BUILD
+constexpr std::size_t kRays = 400;
+#else
+constexpr std::size_t kRays = 3000;
+#endif
+
+KdTree build_tree(const BrickData& brick, const KdTreeBuilder::Config& config = {}) {
+  std::vector<Triangle> triangles;
+  std::vector<TriangleId> ids;
+  for (std::size_t k = 0; k < brick.triangles.size(); ++k) {
+    if (!brick.triangles[k].is_finite() || brick.triangles[k].is_degenerate()) continue;
+    triangles.push_back(brick.triangles[k]);
+    ids.push_back(brick.ids[k]);
+  }
+  return KdTreeBuilder::build(triangles, ids, config).tree;
+}
+
+// Brute force with Test over the tree's own triangles.
+template <class Test>
+void brute_force(const KdTreeView& tree, const Ray& ray, Hit& best, bool& any) {
+  const typename Test::Prepared prepared = Test::prepare(ray);
+  const float tfar = ray.tfar < best.t ? ray.tfar : best.t;
+  uint32_t found = kInvalidId;
+  TriangleHit found_hit{};
+  float limit = tfar;
+  any = false;
+  if (!(limit > ray.tnear)) return;
+  for (uint32_t k = 0; k < tree.triangles.size(); ++k) {
+    TriangleHit h;
+    if (!Test::hit(prepared, tree.triangles[k], ray.tnear, ray.tfar, h)) continue;
+    any = true;
+    if (h.t > limit) continue;
+    if (!hit_is_better(h.t, tree.records[k].geometry_id, tree.records[k].primitive_id, best)) continue;
+    best.t = h.t;
+    best.geometry_id = tree.records[k].geometry_id;
+    best.primitive_id = tree.records[k].primitive_id;
+    found = k;
+    found_hit = h;
+    limit = h.t;
+  }
+  if (found == kInvalidId) return;
+  best.u = found_hit.u;
+  best.v = found_hit.v;
+  best.normal = tree.records[found].normal;
+}
+
+template <class Test>
+void expect_matches_brute_force(const std::string& what, const KdTree& tree, const std::vector<Ray>& rays,
+                                std::size_t min_hits) {
+  const KdTreeView view = tree.view();
+  std::size_t hits = 0, differ = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    Hit want, got;
+    bool want_any = false;
+    brute_force<Test>(view, rays[i], want, want_any);
+    kd_closest_hit<Test>(view, rays[i], got);
+    hits += want.is_hit();
+    if (std::memcmp(&want, &got, sizeof(Hit)) != 0 && differ++ < 5) {
+      ADD_FAILURE() << what << " ray " << i << ": t " << got.t << " vs " << want.t << ", ids "
+                    << got.geometry_id << "/" << got.primitive_id << " vs " << want.geometry_id << "/"
+                    << want.primitive_id;
+    }
+    if (kd_any_hit<Test>(view, rays[i]) != want_any && differ++ < 5) {
+      ADD_FAILURE() << what << " ray " << i << ": any hit " << !want_any << " vs " << want_any;
+    }
+  }
+  EXPECT_EQ(differ, 0u) << what;
+  EXPECT_GE(hits, min_hits) << what;
+}
+
+void expect_every_test_matches(const std::string& what, const KdTree& tree, const std::vector<Ray>& rays,
+                               std::size_t min_hits) {
+  ASSERT_TRUE(tree.view().validate().ok()) << what;
+  expect_matches_brute_force<WatertightTriangleTest>(what + " watertight", tree, rays, min_hits);
+  expect_matches_brute_force<MtTriangleTest>(what + " mt", tree, rays, min_hits / 2);
+  expect_matches_brute_force<DoubleTriangleTest>(what + " double", tree, rays, min_hits);
+}
+
+std::vector<Ray> mixed_rays(const BrickData& brick, std::size_t n, uint64_t seed) {
+  const Aabb b = bounds_of(brick);
+  auto rays = accel_test::rays_from_outside(b, n / 2, seed);
+  const auto inside = accel_test::rays_from_inside(b, n - n / 2, seed + 1);
+  rays.insert(rays.end(), inside.begin(), inside.end());
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    if (i % 7 == 3) rays[i].tfar = 0.3f * length(b.extent());
+    if (i % 11 == 5) rays[i].tnear = 0.05f * length(b.extent());
+    if (i % 13 == 6) rays[i].tnear = -0.5f * length(b.extent());
+  }
+  return rays;
+}
+
+TEST(KdTree, MatchesBruteForceOnGeneratedScenesSoupsAndTheBunny) {
+  for (const char* spec :
+       {"gen:sphere?level=4", "gen:torus?nu=48&nv=24", "gen:terrain?n=24&size=6&height=0.5"}) {
+    const BrickData brick = load_brick_from(spec);
+    expect_every_test_matches(spec, build_tree(brick), mixed_rays(brick, kRays, 21), kRays / 10);
+  }
+  const BrickData random = accel_test::random_triangles(1500, 4);
+  expect_every_test_matches("random", build_tree(random), mixed_rays(random, kRays, 22), kRays / 10);
+  const BrickData scattered = accel_test::scattered_triangles(3000, 5);
+  expect_every_test_matches("scattered", build_tree(scattered), mixed_rays(scattered, kRays, 23), 1);
+  const BrickData degenerate = accel_test::degenerate_heavy(3000, 6);
+  expect_every_test_matches("degenerate", build_tree(degenerate), mixed_rays(degenerate, kRays, 24), 1);
+  const BrickData bunny = load_brick_from(accel_test::bunny_path());
+  expect_every_test_matches("bunny", build_tree(bunny), mixed_rays(bunny, kRays, 25), kRays / 10);
+}
+
+TEST(KdTree, AimedAtVerticesAndEdgesOfAClosedMeshItLeaksNothingAtAnyOffset) {
+  for (const float offset : {0.0f, 1e3f, 1e6f}) {
+    BrickData sphere = load_brick_from("gen:sphere?level=3");
+    const float scale = std::max(1.0f, offset * 1e-3f);
+    for (Triangle& tri : sphere.triangles) {
+      for (Vec3f* v : {&tri.v0, &tri.v1, &tri.v2}) *v = *v * scale + Vec3f(offset, -0.5f * offset, offset);
+    }
+    const Vec3f interior = bounds_of(sphere).center() + Vec3f(0.01f, 0.02f, -0.03f) * scale;
+    std::vector<Ray> rays;
+    for (const Triangle& tri : sphere.triangles) {
+      for (const Vec3f& target :
+           {tri.v0, tri.v1, tri.v2, (tri.v0 + tri.v1) * 0.5f, (tri.v1 + tri.v2) * 0.5f}) {
+        Ray ray;
+        ray.origin = interior;
+        ray.direction = target - interior;
+        rays.push_back(ray);
+      }
+    }
+    const KdTree tree = build_tree(sphere);
+    const std::string what = "aimed sphere +" + std::to_string(offset);
+    expect_every_test_matches(what, tree, rays, rays.size());
+    std::size_t leaks = 0;
+    for (const Ray& ray : rays) {
+      Hit hit;
+      leaks += !kd_closest_hit<WatertightTriangleTest>(tree.view(), ray, hit);
+    }
+    EXPECT_EQ(leaks, 0u) << what;
+  }
+}
+
+// Rays in the tree's own split planes (parallel, origin on the plane) and
+// rays crossing a split plane exactly at a vertex lying on it.
+TEST(KdTree, RaysInAndThroughSplitPlanesLoseNothing) {
+  for (const char* spec : {"gen:terrain?n=16&size=4&height=0", "gen:sphere?level=3"}) {
+    const BrickData brick = load_brick_from(spec);
+    const KdTree tree = build_tree(brick);
+    const Aabb b = bounds_of(brick);
+    std::vector<Ray> rays;
+    for (const KdNode& node : tree.nodes) {
+      if (node.is_leaf()) continue;
+      const int axis = node.axis();
+      for (int other = 0; other < 3; ++other) {
+        if (other == axis) continue;
+        Ray in_plane;
+        in_plane.origin = b.center();
+        in_plane.origin[axis] = node.split();
+        in_plane.origin[other] = b.lo[other] - 1.0f;
+        in_plane.direction = {0, 0, 0};
+        in_plane.direction[other] = 1.0f;
+        rays.push_back(in_plane);
+      }
+      for (const Triangle& tri : brick.triangles) {
+        for (const Vec3f& v : {tri.v0, tri.v1, tri.v2}) {
+          if (v[axis] != node.split() || rays.size() > 20 * tree.nodes.size()) continue;
+          Ray through;
+          through.origin = b.center() + Vec3f(0.3f, 0.7f, 0.2f) * length(b.extent());
+          through.direction = v - through.origin;
+          rays.push_back(through);
+        }
+      }
+    }
+    ASSERT_GT(rays.size(), 10u) << spec;
+    expect_every_test_matches(std::string(spec) + " split planes", tree, rays, 1);
+  }
+}
+
+// A hand-built tree: the root splits x at 0 (leaf A below), its upper child
+// splits y at 0 (leaf B below, leaf C above). A ray from (-2, -2.5, 0) along
+// (1, 1, 0) crosses x = 0 at t = 2 and y = 0 at t = 2.5: it must visit A, B,
+// C in that order with the cells' parts of the segment. Triangle 0, in B and
+// C, is hit at t = 3 (in C's part): when B finds it, the walk must go on to
+// C, where triangle 1 is hit nearer, at t = 2.8.
+TEST(KdTree, TheWalkVisitsCellsInOrderAndASpanningTriangleDoesNotEndItEarly) {
+  // A triangle in the plane x = c around y = c - 0.5, where the ray meets
+  // it at t = c + 2; wall(1) reaches below y = 0 (into B).
+  const auto wall = [](float x) {
+    const float y = x - 0.5f;
+    return Triangle{{x, y - 1.0f, -1.0f}, {x, y - 1.0f, 1.0f}, {x, y + 1.0f, 0.0f}};
+  };
+  KdTree tree;
+  tree.triangles = {wall(1.0f), wall(0.8f)};
+  tree.records = {{tree.triangles[0].unit_normal(), 0, 0}, {tree.triangles[1].unit_normal(), 0, 1}};
+  tree.bounds = {{-4, -4, -4}, {4, 4, 4}};
+  tree.refs = {0, 0, 1};
+  tree.nodes = {KdNode::inner(0, 0.0f, 2), KdNode::leaf(0, 0), KdNode::inner(1, 0.0f, 4), KdNode::leaf(0, 1),
+                KdNode::leaf(1, 2)};
+  ASSERT_TRUE(tree.view().validate().ok());
+
+  Ray ray;
+  ray.origin = {-2.0f, -2.5f, 0.0f};
+  ray.direction = {1.0f, 1.0f, 0.0f};
+  struct Visit {
+    uint32_t first, count;
+  };
+  std::vector<Visit> visits;
+  float limit = ray.tfar;
+  kd_detail::traverse(tree.view(), ray, 0.0f, limit, [&](uint32_t first, uint32_t count, float&) {
+    visits.push_back({first, count});
+    return false;
+  });
+  ASSERT_EQ(visits.size(), 3u);
+  EXPECT_EQ(visits[0].count, 0u);  // A
+  EXPECT_EQ(visits[1].first, 0u);  // B
+  EXPECT_EQ(visits[2].first, 1u);  // C
+
+  Hit hit;
+  ASSERT_TRUE(kd_closest_hit<WatertightTriangleTest>(tree.view(), ray, hit));
+  EXPECT_EQ(hit.primitive_id, 1u);
+  EXPECT_NEAR(hit.t, 2.8f, 1e-5f);
+}
+
+TEST(KdTree, TheBuildReferencesEveryTriangleAndKeepsItsBudgets) {
+  const BrickData bunny = load_brick_from(accel_test::bunny_path());
+  const KdTreeBuilder::Result built = KdTreeBuilder::build(bunny.triangles, bunny.ids, {});
+  const KdTree& tree = built.tree;
+  ASSERT_TRUE(tree.view().validate().ok());
+  std::vector<uint8_t> seen(tree.triangles.size(), 0);
+  for (const uint32_t ref : tree.refs) seen[ref] = 1;
+  EXPECT_EQ(std::count(seen.begin(), seen.end(), 0), 0);
+  const uint64_t n = bunny.triangles.size();
+  EXPECT_LE(tree.refs.size(), KdTreeBuilder::kMaxReferencesPerTriangle * n + 64);
+  EXPECT_LE(tree.memory_bytes(), KdTreeBuilder::tree_bytes_bound(n));
+  EXPECT_LE(built.peak_bytes, KdTreeBuilder::peak_bytes_bound(n));
+  EXPECT_GT(tree.nodes.size(), n / 8);  // it did split
+  // A depth limit of 1 leaves one leaf with everything.
+  KdTreeBuilder::Config shallow;
+  shallow.max_depth = 1;
+  const KdTree flat = KdTreeBuilder::build(bunny.triangles, bunny.ids, shallow).tree;
+  ASSERT_EQ(flat.nodes.size(), 1u);
+  EXPECT_EQ(flat.refs.size(), n);
+}
+
+TEST(KdTree, AViewThatDoesNotHoldTogetherIsAnError) {
+  KdTree tree;
+  tree.triangles = {Triangle{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}};
+  tree.records = {{{0, 0, 1}, 0, 0}};
+  tree.refs = {0};
+  tree.nodes = {KdNode::inner(0, 0.5f, 1), KdNode::leaf(0, 1)};  // above child == below child
+  EXPECT_FALSE(tree.view().validate().ok());
+  tree.nodes = {KdNode::inner(0, 0.5f, 2), KdNode::leaf(0, 1), KdNode::leaf(0, 2)};  // past the refs
+  EXPECT_FALSE(tree.view().validate().ok());
+  tree.nodes = {KdNode::leaf(0, 1)};
+  tree.refs = {7};  // no such triangle
+  EXPECT_FALSE(tree.view().validate().ok());
+}
+
+TEST(KdTree, TheFactoryMakesItByNameAndRejectsBadOptions) {
+  auto builder = make_brick_builder("kdtree", {});
+  ASSERT_TRUE(builder.ok());
+  EXPECT_EQ((*builder)->name(), "kdtree");
+  EXPECT_TRUE(make_brick_builder("kdtree", {{"triangle_test", "double"}, {"empty_bonus", "0.2"}}).ok());
+  for (const BrickAccelOptions& bad : std::vector<BrickAccelOptions>{{{"triangle_test", "exact"}},
+                                                                     {{"empty_bonus", "1"}},
+                                                                     {{"max_depth", "65"}},
+                                                                     {{"intersection_cost", "-1"}},
+                                                                     {{"bins", "8"}}}) {
+    const auto made = make_brick_builder("kdtree", bad);
+    ASSERT_FALSE(made.ok()) << bad.begin()->first;
+    EXPECT_NE(made.status().message().find(bad.begin()->first), std::string::npos) << made.status().message();
+  }
+  // Built through the factory, a brick answers as brute force.
+  BrickData sphere = load_brick_from("gen:sphere?level=3");
+  const std::vector<Ray> rays = mixed_rays(sphere, 500, 31);
+  auto accel = (*builder)->build(BrickData(sphere));
+  ASSERT_TRUE(accel.ok());
+  EXPECT_LE((*accel)->memory_bytes(),
+            (*builder)->reserve_bytes(static_cast<uint32_t>(sphere.triangles.size())));
+  std::vector<Hit> got(rays.size());
+  (*accel)->intersect(accel_test::all_ids(rays.size()), rays.data(), got.data());
+  const KdTree tree = build_tree(sphere);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    Hit want;
+    bool any = false;
+    brute_force<WatertightTriangleTest>(tree.view(), rays[i], want, any);
+    EXPECT_EQ(std::memcmp(&want, &got[i], sizeof(Hit)), 0) << "ray " << i;
+  }
+}
+
+}  // namespace
+}  // namespace outcore
