@@ -6,7 +6,6 @@
 #include <cmath>
 #include <limits>
 #include <string>
-#include <tuple>
 #include <utility>
 
 namespace outcore {
@@ -23,9 +22,15 @@ struct Event {
   uint8_t type;
 };
 
-bool event_less(const Event& a, const Event& b) {
-  return std::tie(a.axis, a.position, a.type) < std::tie(b.axis, b.position, b.type);
-}
+// A function object, so that sort and merge inline it.
+struct EventLess {
+  bool operator()(const Event& a, const Event& b) const {
+    if (a.axis != b.axis) return a.axis < b.axis;
+    if (a.position != b.position) return a.position < b.position;
+    return a.type < b.type;
+  }
+};
+constexpr EventLess event_less;
 
 using Events = std::vector<Event>;
 
@@ -133,13 +138,17 @@ class Build {
     Events().swap(events);
   }
 
-  double cost(int axis, float position, const Aabb& box, double box_area, uint32_t below,
+  // The SAH cost of splitting `box` (extent e, half area box_area) at
+  // `position` on `axis`: a child's half area is the face across the axis
+  // plus its length along the axis times the other two extents.
+  double cost(int axis, float position, const Aabb& box, const Vec3d& e, double box_area, uint32_t below,
               uint32_t above) const {
-    Aabb lower = box, upper = box;
-    lower.hi[axis] = position;
-    upper.lo[axis] = position;
-    double c = config_.traversal_cost + config_.intersection_cost * (lower.half_area() / box_area * below +
-                                                                     upper.half_area() / box_area * above);
+    const int a = (axis + 1) % 3, b = (axis + 2) % 3;
+    const double face = e[a] * e[b], rim = e[a] + e[b];
+    const double lower_area = face + (double{position} - box.lo[axis]) * rim;
+    const double upper_area = face + (double{box.hi[axis]} - position) * rim;
+    double c = config_.traversal_cost +
+               config_.intersection_cost * (lower_area * below + upper_area * above) / box_area;
     if (below == 0 || above == 0) c *= 1.0 - config_.empty_bonus;
     return c;
   }
@@ -150,6 +159,7 @@ class Build {
     Split best;
     const double box_area = box.half_area();
     if (!(box_area > 0.0)) return best;
+    const Vec3d e(box.extent());
     std::array<uint32_t, 3> below{0, 0, 0}, above{n, n, n};
     std::size_t i = 0;
     while (i < events.size()) {
@@ -165,8 +175,8 @@ class Build {
       while (at(kStart)) ++starting, ++i;
       above[axis] -= planar + ending;
       if (box.lo[axis] < position && position < box.hi[axis]) {
-        const double planar_below = cost(axis, position, box, box_area, below[axis] + planar, above[axis]);
-        const double planar_above = cost(axis, position, box, box_area, below[axis], above[axis] + planar);
+        const double planar_below = cost(axis, position, box, e, box_area, below[axis] + planar, above[axis]);
+        const double planar_above = cost(axis, position, box, e, box_area, below[axis], above[axis] + planar);
         if (planar_below < best.cost) best = {axis, position, true, planar_below};
         if (planar_above < best.cost) best = {axis, position, false, planar_above};
       }
