@@ -227,7 +227,7 @@ Status BrickCache::enable_subtree_tier(const SubtreeTierOptions& options) {
   const BrickSerializer* serializer = builder_->serializer();
   if (serializer == nullptr) {
     return failed_precondition("brick structure '" + builder_->name() +
-                               "' cannot be kept in a subtree tier (it cannot be serialised; bvh can)");
+                               "' cannot be kept in a subtree tier (it has no serialiser)");
   }
   OUTCORE_ASSIGN_OR_RETURN(tier_, SubtreeTier::open(options, *serializer));
   return Status::Ok();

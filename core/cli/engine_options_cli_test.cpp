@@ -67,7 +67,7 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
   cases[6].message = "--reference chooses the brick structure itself";
   cases[7].cli.brick_accel = "embree";
   cases[7].cli.subtree.dir = "/tmp/x";
-  cases[7].message = "--subtree-dir needs --brick-accel bvh (got 'embree'";
+  cases[7].message = "--subtree-dir needs --brick-accel bvh|kdtree (got 'embree'";
   for (const Case& c : cases) {
     const Status status = apply(c.cli);
     EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << c.message;

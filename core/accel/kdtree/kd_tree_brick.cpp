@@ -7,6 +7,7 @@
 #include "core/accel/bvh/double_triangle_test.h"
 #include "core/accel/bvh/mt_triangle_test.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
+#include "core/accel/kdtree/kd_tree_brick_serializer.h"
 #include "core/accel/kdtree/kd_tree_traversal.h"
 
 namespace outcore {
@@ -37,6 +38,7 @@ Expected<std::unique_ptr<KdTreeBrickAccel>> KdTreeBrickAccel::build(BrickData&& 
   std::unique_ptr<KdTreeBrickAccel> accel(new KdTreeBrickAccel());
   accel->test_ = config.triangle_test;
   accel->triangle_count_ = static_cast<uint32_t>(n);
+  accel->brick_id_ = brick.brick_id;
   uint64_t kept = 0;
   for (uint64_t k = 0; k < n; ++k) {
     const Triangle& tri = brick.triangles[k];
@@ -53,6 +55,16 @@ Expected<std::unique_ptr<KdTreeBrickAccel>> KdTreeBrickAccel::build(BrickData&& 
   accel->tree_ = std::move(built.tree);
   accel->build_peak_bytes_ = input_bytes + built.peak_bytes + accel->tree_.memory_bytes() + kOverheadBytes;
   accel->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return accel;
+}
+
+std::unique_ptr<KdTreeBrickAccel> KdTreeBrickAccel::from_tree(KdTree tree, TriangleTest test,
+                                                              uint32_t brick_id, uint32_t triangle_count) {
+  std::unique_ptr<KdTreeBrickAccel> accel(new KdTreeBrickAccel());
+  accel->tree_ = std::move(tree);
+  accel->test_ = test;
+  accel->brick_id_ = brick_id;
+  accel->triangle_count_ = triangle_count;
   return accel;
 }
 
@@ -76,6 +88,15 @@ void KdTreeBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* ra
       if (occluded[i] == 0 && kd_any_hit<Test>(view, rays[i])) occluded[i] = 1;
     }
   });
+}
+
+KdTreeBrickBuilder::KdTreeBrickBuilder(const KdTreeBrickConfig& config)
+    : config_(config), serializer_(std::make_unique<KdTreeBrickSerializer>(config)) {}
+
+KdTreeBrickBuilder::~KdTreeBrickBuilder() = default;
+
+const BrickSerializer* KdTreeBrickBuilder::serializer() const {
+  return serializer_.get();
 }
 
 Expected<std::unique_ptr<BrickAccel>> KdTreeBrickBuilder::build(BrickData&& brick) const {

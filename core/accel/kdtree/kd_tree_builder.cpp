@@ -345,8 +345,11 @@ KdTreeBuilder::Result KdTreeBuilder::build(std::vector<Triangle> triangles,
   tree.triangles = std::move(triangles);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run(tree.bounds);
+  // Exact capacities: memory_bytes() then equals a reloaded tree's (the
+  // subtree tier's accounting does not depend on where a brick came from).
   tree.nodes.shrink_to_fit();
   tree.refs.shrink_to_fit();
+  tree.triangles.shrink_to_fit();
   return result;
 }
 

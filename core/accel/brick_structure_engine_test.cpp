@@ -1,8 +1,11 @@
-// Engine-level tests of the "bvh" and "reference" brick structures: a packed
-// store traced through QueryEngine with --brick-accel bvh (every triangle
-// test) answers as the float64 brute force does, bitwise the same with one
-// big brick or many tiny ones, and the "reference" structure (what
-// `outcore trace --reference` uses) agrees with brute_force_reference.h.
+// Engine-level tests of our brick structures ("bvh", "kdtree") and the
+// "reference" one: a packed store traced through QueryEngine with each
+// structure and every triangle test answers as the float64 brute force does,
+// bitwise the same with one big brick or many tiny ones, under a budget of
+// two bricks, with the rays queued at bricks or run one by one, and across
+// structures (both are exact walks over the same triangle test); the
+// "reference" structure (what `outcore trace --reference` uses) agrees with
+// brute_force_reference.h.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -93,29 +96,59 @@ bool bitwise_equal(const std::vector<Hit>& a, const std::vector<Hit>& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(Hit)) == 0;
 }
 
-TEST(BvhEngine, EveryTriangleTestMatchesTheReferenceAndBrickSizeDoesNotMatter) {
+// Our structures with a triangle test option, each traced in every test.
+constexpr const char* kStructures[] = {"bvh", "kdtree"};
+
+TEST(BrickStructureEngine, EveryTriangleTestMatchesTheReferenceAndBrickSizeDoesNotMatter) {
   const std::vector<std::string> inputs = {"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5",
                                            "gen:terrain?n=24&size=6&height=0.5"};
   const auto small = pack(inputs, 96);
   const auto big = pack(inputs, 1u << 20);
   const auto rays = mixed_rays(small->bounds, 2500, 1);
   for (const char* test : {"mt", "watertight", "double"}) {
-    const auto hits = trace(*small, rays, "bvh", {{"triangle_test", test}});
-    expect_matches_reference(*small, rays, hits, test);
-    if (std::string(test) != "mt") {
-      // Watertight tests: brick seams are no weaker than a brick's inside.
-      EXPECT_TRUE(bitwise_equal(hits, trace(*big, rays, "bvh", {{"triangle_test", test}}))) << test;
+    std::vector<Hit> first;
+    for (const char* structure : kStructures) {
+      const std::string what = std::string(structure) + " " + test;
+      const auto hits = trace(*small, rays, structure, {{"triangle_test", test}});
+      expect_matches_reference(*small, rays, hits, what);
+      if (std::string(test) != "mt") {
+        // Watertight tests: brick seams are no weaker than a brick's inside.
+        EXPECT_TRUE(bitwise_equal(hits, trace(*big, rays, structure, {{"triangle_test", test}}))) << what;
+      }
+      if (first.empty()) first = hits;
+      EXPECT_TRUE(bitwise_equal(hits, first)) << what << ": the same answers as " << kStructures[0];
     }
   }
 }
 
-TEST(BvhEngine, BunnyMatchesTheReference) {
+TEST(BrickStructureEngine, BunnyMatchesTheReference) {
   const auto scene = pack({testing::model_path("stanford-bunny.obj")}, 4096);
   const auto rays = mixed_rays(scene->bounds, 1000, 2);
-  expect_matches_reference(*scene, rays, trace(*scene, rays, "bvh", {}), "bvh default");
+  for (const char* structure : kStructures) {
+    expect_matches_reference(*scene, rays, trace(*scene, rays, structure, {}), structure);
+  }
 }
 
-TEST(BvhEngine, ReferenceStructureAgreesWithTheBruteForce) {
+// Rays run one by one in input order (no queues at bricks) answer bitwise as
+// the queued batch.
+TEST(BrickStructureEngine, ReorderOnAndOffAnswerTheSame) {
+  const auto scene = pack({"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5"}, 200);
+  const auto rays = mixed_rays(scene->bounds, 2000, 5);
+  for (const char* structure : kStructures) {
+    EngineOptions options;
+    options.brick_accel = structure;
+    auto engine = QueryEngine::open(scene->path, options);
+    ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+    std::vector<Hit> queued(rays.size()), sequential(rays.size());
+    ASSERT_TRUE((*engine)->intersect(rays, queued, {}).ok());
+    QueryOptions one_by_one;
+    one_by_one.reorder = false;
+    ASSERT_TRUE((*engine)->intersect(rays, sequential, one_by_one).ok());
+    EXPECT_TRUE(bitwise_equal(queued, sequential)) << structure;
+  }
+}
+
+TEST(BrickStructureEngine, ReferenceStructureAgreesWithTheBruteForce) {
   const auto scene = pack({"gen:sphere?level=3", "gen:torus?nu=32&nv=16&cx=1.5"}, 128);
   const auto rays = mixed_rays(scene->bounds, 1500, 3);
   const auto hits = trace(*scene, rays, "reference", {});
@@ -124,23 +157,19 @@ TEST(BvhEngine, ReferenceStructureAgreesWithTheBruteForce) {
   EXPECT_TRUE(bitwise_equal(hits, trace(*scene, rays, "bvh", {{"triangle_test", "double"}})));
 }
 
-// The cache admits bvh bricks on their reserve_bytes(): with a budget of two
-// bricks every build fits its reservation and the answers are bitwise those
-// of an unlimited budget.
-TEST(BvhEngine, TinyBudgetAnswersLikeAnUnlimitedOneWithinItsReservations) {
-  const auto scene = pack({"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5"}, 128);
-  const auto rays = mixed_rays(scene->bounds, 2000, 4);
-  const auto unlimited = trace(*scene, rays, "bvh", {});
+void expect_tiny_budget_answers_like_unlimited(const Packed& scene, const std::vector<Ray>& rays,
+                                               const std::string& structure) {
+  const auto unlimited = trace(scene, rays, structure, {});
   EngineOptions options;
-  options.brick_accel = "bvh";
-  auto probe = QueryEngine::open(scene->path, options);
+  options.brick_accel = structure;
+  auto probe = QueryEngine::open(scene.path, options);
   ASSERT_TRUE(probe.ok());
   uint64_t most = 0;
   for (const auto& b : (*probe)->store().manifest().bricks) {
     most = std::max(most, (*probe)->cache().builder().reserve_bytes(b.triangle_count));
   }
   options.cache_bytes = 2 * most;
-  auto engine = QueryEngine::open(scene->path, options);
+  auto engine = QueryEngine::open(scene.path, options);
   ASSERT_TRUE(engine.ok());
   std::vector<Hit> hits(rays.size());
   QueryStats stats;
@@ -149,6 +178,18 @@ TEST(BvhEngine, TinyBudgetAnswersLikeAnUnlimitedOneWithinItsReservations) {
   EXPECT_GT(stats.evictions, 0u);
   EXPECT_LE(stats.peak_bytes_resident, options.cache_bytes);
   EXPECT_EQ((*engine)->cache().counters().reservation_overruns, 0u);
+}
+
+// The cache admits bricks on their reserve_bytes(): with a budget of two
+// bricks every build fits its reservation and the answers are bitwise those
+// of an unlimited budget.
+TEST(BrickStructureEngine, TinyBudgetAnswersLikeAnUnlimitedOneWithinItsReservations) {
+  const auto scene = pack({"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5"}, 128);
+  const auto rays = mixed_rays(scene->bounds, 2000, 4);
+  for (const char* structure : kStructures) {
+    SCOPED_TRACE(structure);
+    expect_tiny_budget_answers_like_unlimited(*scene, rays, structure);
+  }
 }
 
 }  // namespace
