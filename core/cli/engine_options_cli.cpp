@@ -75,6 +75,11 @@ void add_cache_options(CLI::App& command, EngineCliOptions& options) {
       ->capture_default_str();
   command.add_option("--policy", options.policy, "Cache eviction policy")->capture_default_str();
   command.add_option("--brick-accel", options.brick_accel, "Brick structure")->capture_default_str();
+  command
+      .add_option("--brick-bounds", options.brick_bounds,
+                  "Bound tested before a brick beyond the upper hierarchy's box: aabb (none), sphere or obb "
+                  "(fitted at pack time; answers are the same, brick visits without a hit fewer)")
+      ->capture_default_str();
   add_subtree_options(command, options.subtree);
 }
 
@@ -94,6 +99,10 @@ Status apply_engine_options(const EngineCliOptions& cli, EngineOptions& options)
   options.eviction_policy = cli.policy;
   options.brick_accel = cli.brick_accel;
   options.accel_options = *accel_options;
+  if (!brick_bound_from_name(cli.brick_bounds)) {
+    return invalid_argument("--brick-bounds must be aabb, sphere or obb, got '" + cli.brick_bounds + "'");
+  }
+  options.brick_bounds = cli.brick_bounds;
   // --reference names the structure, which the subtree check needs.
   OUTCORE_RETURN_IF_ERROR(apply_brick_structure_choices(cli, options));
   return apply_subtree_options(cli.subtree, options);

@@ -27,6 +27,7 @@ struct EngineCliOptions {
   uint64_t cache_mb = 1024;
   std::string policy = "lru";
   std::string brick_accel = kDefaultBrickAccel;
+  std::string brick_bounds = kDefaultBrickBounds;
   SubtreeCliOptions subtree;
   bool no_proxies = false;
   std::optional<int64_t> proxy_res;  // unset: the default resolution

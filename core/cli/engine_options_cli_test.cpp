@@ -47,7 +47,7 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
     EngineCliOptions cli;
     std::string message;
   };
-  std::vector<Case> cases(8);
+  std::vector<Case> cases(9);
   cases[0].cli.cache_mb = 0;
   cases[0].message = "--cache-mb must be between 1 and 17592186044415, got 0";
   cases[1].cli.proxy_res = 1'000'000;
@@ -68,6 +68,8 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
   cases[7].cli.brick_accel = "embree";
   cases[7].cli.subtree.dir = "/tmp/x";
   cases[7].message = "--subtree-dir needs --brick-accel bvh|kdtree (got 'embree'";
+  cases[8].cli.brick_bounds = "kdop";
+  cases[8].message = "--brick-bounds must be aabb, sphere or obb, got 'kdop'";
   for (const Case& c : cases) {
     const Status status = apply(c.cli);
     EXPECT_EQ(status.code(), StatusCode::kInvalidArgument) << c.message;

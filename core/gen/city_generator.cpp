@@ -44,6 +44,7 @@ Expected<CityConfig> CityConfig::parse(const GenSpec& spec) {
   p.integer("copies", c.copies, 1, kMaxCopies);
   p.integer("seed", c.seed, 0, std::numeric_limits<int64_t>::max());
   p.real("spacing", c.spacing, RealRange::positive());
+  p.real("tilt", c.tilt_degrees, RealRange::closed(-90.0, 90.0));
   OUTCORE_RETURN_IF_ERROR(p.finish());
   return c;
 }
@@ -165,6 +166,12 @@ CopyTransform CityGenerator::copy_transform(int64_t copy) const {
   // p -> M (p - centre) + place  ==  M p + (place - M centre)
   t.t = Vec3d(place.x - (t.sc * centre_.x + t.ss * centre_.z), place.y - scale * centre_.y,
               place.z - (t.sc * centre_.z - t.ss * centre_.x));
+  if (config_.tilt_degrees != 0) {
+    const double tilt = config_.tilt_degrees * std::numbers::pi / 180.0;
+    t.tilted = true;
+    t.tc = std::cos(tilt);
+    t.ts = std::sin(tilt);
+  }
   return t;
 }
 

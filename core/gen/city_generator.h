@@ -20,7 +20,11 @@
 //
 // Parameters: of (base mesh, default gen:sphere?level=3; wrap a nested spec in
 // parentheses), copies (1..1e9, default 100), seed (0..2^63-1, default 1),
-// spacing (grid cell size, > 0, default 2.5 x the base's bounding-box diagonal).
+// spacing (grid cell size, > 0, default 2.5 x the base's bounding-box diagonal),
+// tilt (degrees, -90..90, default 0: the whole city turned about the x axis
+// through the origin after the copies are placed, so that its flat layer of
+// copies lies oblique to every axis: the rotated scene on which oriented
+// brick bounds and BSP planes are measured; tilt=0 is bitwise the untilted city).
 // copies * base_count must stay <= 2^32 - 1 (uint32 primitive ids).
 //
 // Thread-safety: see Generator (emit() is const and stateless).
@@ -43,6 +47,7 @@ struct CityConfig {
   int64_t copies = 100;                   // number of copies, laid out on ceil(sqrt(copies))^2 cells
   int64_t seed = 1;                       // drives every copy's transform
   std::optional<double> spacing;          // cell size; default 2.5 x the base's bounding diagonal
+  double tilt_degrees = 0;                // the whole city turned about x
 
   static constexpr int64_t kMaxCopies = 1'000'000'000;
   static Expected<CityConfig> parse(const GenSpec& spec);
@@ -52,12 +57,18 @@ struct CityConfig {
 // translation (the base's centre folded into t):
 //   x' = sc * x + ss * z + t.x,  y' = scale * y + t.y,  z' = sc * z - ss * x + t.z
 // with sc = scale * cos(a), ss = scale * sin(a); computed in double.
+// With a tilt, the result is then turned about x: y' = tc y - ts z,
+// z' = ts y + tc z (still in double, rounded once).
 struct CopyTransform {
   double sc = 1, ss = 0, scale = 1;
   Vec3d t;
+  bool tilted = false;
+  double tc = 1, ts = 0;
   Vec3f apply(const Vec3f& p) const {
     const double x = p.x, y = p.y, z = p.z;
-    return to_vertex(Vec3d(sc * x + ss * z + t.x, scale * y + t.y, sc * z - ss * x + t.z));
+    const Vec3d placed(sc * x + ss * z + t.x, scale * y + t.y, sc * z - ss * x + t.z);
+    if (!tilted) return to_vertex(placed);
+    return to_vertex(Vec3d(placed.x, tc * placed.y - ts * placed.z, ts * placed.y + tc * placed.z));
   }
 };
 

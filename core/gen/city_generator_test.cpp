@@ -3,10 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <set>
 
 #include "core/gen/gen_test_util.h"
@@ -55,6 +57,35 @@ TEST(CityGenerator, TrianglesAreCopyMajorTransformsOfTheBase) {
       const double l0 = length(Vec3d(base[k].v1) - Vec3d(base[k].v0));
       ASSERT_NEAR(length(Vec3d(got.v1) - Vec3d(got.v0)), t.scale * l0, 1e-5 * l0 + 1e-5);
     }
+  }
+}
+
+// tilt turns the whole city about the x axis: tilt=0 is bitwise the city
+// without it, and a tilted vertex is the untilted one turned (to float
+// rounding); x never changes. Out-of-range tilts are errors naming the parameter.
+TEST(CityGenerator, TiltTurnsTheWholeCityAboutX) {
+  const std::string base = "gen:city?of=(gen:sphere?level=1)&copies=9&seed=2";
+  const auto flat = collect_spec(base);
+  EXPECT_EQ(collect_spec(base + "&tilt=0"), flat);
+  const auto tilted = collect_spec(base + "&tilt=30");
+  ASSERT_EQ(tilted.size(), flat.size());
+  const double c = std::cos(std::numbers::pi / 6), s = std::sin(std::numbers::pi / 6);
+  for (std::size_t k = 0; k < flat.size(); ++k) {
+    for (int v = 0; v < 3; ++v) {
+      const Vec3f& a = v == 0 ? flat[k].v0 : (v == 1 ? flat[k].v1 : flat[k].v2);
+      const Vec3f& b = v == 0 ? tilted[k].v0 : (v == 1 ? tilted[k].v1 : tilted[k].v2);
+      ASSERT_EQ(a.x, b.x) << "triangle " << k;
+      const double scale = 1e-5 * (std::fabs(a.y) + std::fabs(a.z) + 1);
+      ASSERT_NEAR(b.y, c * a.y - s * a.z, scale) << "triangle " << k;
+      ASSERT_NEAR(b.z, s * a.y + c * a.z, scale) << "triangle " << k;
+    }
+  }
+  for (const char* bad : {"&tilt=91", "&tilt=-90.5", "&tilt=x"}) {
+    auto parsed = parse_gen_spec(base + bad);
+    ASSERT_TRUE(parsed.ok());
+    auto city = CityGenerator::create(*parsed);
+    ASSERT_FALSE(city.ok()) << bad;
+    EXPECT_NE(city.status().message().find("tilt"), std::string::npos) << city.status().message();
   }
 }
 

@@ -57,7 +57,7 @@ void trace_and_advance(const RayWalk<kKind>& walk, RayProgress* progress, uint32
                        const BrickAccel& accel, std::span<const uint32_t> ids, VisitCounters& counters,
                        MovedRays& moved) {
   const QueryBatch<kKind>& batch = walk.batch;
-  batch.trace(accel, ids);
+  counters.visits_without_hit += batch.trace(accel, ids);
   if (walk.demand.tracking()) walk.demand.sub(brick, static_cast<uint32_t>(ids.size()));
   for (std::size_t k = 0; k < ids.size(); ++k) {
     if (k + kAdvancePrefetch < ids.size()) {

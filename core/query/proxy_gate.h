@@ -7,6 +7,11 @@
 // only for bricks not known to be resident: a fully cached scene pays nothing
 // for proxies. A stale view of what is resident costs at most a load or a test.
 //
+// Before the proxy, the brick's bound (BrickBounds, --brick-bounds) when
+// one beyond the upper hierarchy's boxes was chosen: it is cheap and tested
+// whether the brick is resident or not, since its point is to spare brick
+// visits that find nothing. admits() is the whole gate.
+//
 // Thread-safety: may_hit() and needs_no_test() run concurrently; the view of
 // resident bricks is written only between parallel phases.
 #pragma once
@@ -18,12 +23,16 @@
 #include "core/proxy/proxy_set.h"
 #include "core/query/visit_stats.h"
 #include "core/ray/ray_types.h"
+#include "core/upper/brick_bounds.h"
 
 namespace outcore {
 
 class ProxyGate {
  public:
-  ProxyGate(const ProxySet* proxies, double hit_rounding) : proxies_(proxies), hit_rounding_(hit_rounding) {}
+  ProxyGate(const ProxySet* proxies, double hit_rounding, const BrickBounds* bounds = nullptr)
+      : proxies_(proxies),
+        hit_rounding_(hit_rounding),
+        bounds_(bounds != nullptr && bounds->active() ? bounds : nullptr) {}
 
   const ProxySet* proxies() const { return proxies_; }
 
@@ -57,9 +66,28 @@ class ProxyGate {
     return may;
   }
 
+  // Whether the bound (if one is tested) admits `ray` over [tnear, tmax] to
+  // `brick`; counts a rejection in `counters`.
+  bool bound_admits(uint32_t brick, const Ray& ray, float tmax, VisitCounters& counters) const {
+    if (bound_may_hit(brick, ray, tmax)) return true;
+    ++counters.skipped_by_bound;
+    return false;
+  }
+  // The same, uncounted (trace-ahead counts when the visit is taken).
+  bool bound_may_hit(uint32_t brick, const Ray& ray, float tmax) const {
+    return bounds_ == nullptr || bounds_->may_hit(brick, ray, ray.tnear, tmax);
+  }
+  // The gate: the bound, then the proxy unless none is wanted. A rejection by
+  // the proxy is the caller's to count (as skipped).
+  bool admits(uint32_t brick, const Ray& ray, float tmax, VisitCounters& counters) const {
+    if (!bound_admits(brick, ray, tmax, counters)) return false;
+    return needs_no_test(brick) || may_hit(brick, ray, tmax, counters);
+  }
+
  private:
   const ProxySet* proxies_;
   double hit_rounding_;
+  const BrickBounds* bounds_;            // null: only the upper hierarchy's boxes
   std::vector<uint8_t> known_resident_;  // empty: no view kept
 };
 

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -69,13 +70,37 @@ struct QueryBatch {
     if constexpr (kKind == QueryKind::kAnyHit) return occluded[i] != 0;
     return false;
   }
-  // Traces the rays `ids` at one brick (one virtual call for them all).
-  void trace(const BrickAccel& accel, std::span<const uint32_t> ids) const {
+  // Traces the rays `ids` at one brick (one virtual call per
+  // kTraceChunk of them); returns how many found no hit there: nothing
+  // nearer (or tied and preferred) than the hit the ray had, or still
+  // unoccluded. The answers before are kept on the stack, a chunk at a time.
+  static constexpr std::size_t kTraceChunk = 512;
+  uint64_t trace(const BrickAccel& accel, std::span<const uint32_t> ids) const {
+    uint64_t without_hit = 0;
     if constexpr (kKind == QueryKind::kClosestHit) {
-      accel.intersect(ids, rays.data(), hits);
+      for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
+        const std::span<const uint32_t> chunk = ids.subspan(from, std::min(kTraceChunk, ids.size() - from));
+        float t[kTraceChunk];
+        uint32_t primitive[kTraceChunk], geometry[kTraceChunk];
+        for (std::size_t k = 0; k < chunk.size(); ++k) {
+          const Hit& h = hits[chunk[k]];
+          t[k] = h.t;
+          primitive[k] = h.primitive_id;
+          geometry[k] = h.geometry_id;
+        }
+        accel.intersect(chunk, rays.data(), hits);
+        for (std::size_t k = 0; k < chunk.size(); ++k) {
+          const Hit& h = hits[chunk[k]];
+          // t compared by bits: a ray's miss may carry t = +inf or tfar.
+          without_hit += std::bit_cast<uint32_t>(h.t) == std::bit_cast<uint32_t>(t[k]) &&
+                         h.primitive_id == primitive[k] && h.geometry_id == geometry[k];
+        }
+      }
     } else {
       accel.occluded(ids, rays.data(), occluded);
+      for (const uint32_t i : ids) without_hit += occluded[i] == 0;
     }
+    return without_hit;
   }
 };
 

@@ -1,6 +1,7 @@
 #include "core/query/query_engine.h"
 
 #include <algorithm>
+#include <optional>
 
 #include "core/cache/cache_budget.h"
 #include "core/query/batch_planner.h"
@@ -37,6 +38,18 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   BrickAccelOptions accel_options = options.accel_options;
   OUTCORE_ASSIGN_OR_RETURN(auto builder, make_brick_builder(options.brick_accel, accel_options));
   OUTCORE_ASSIGN_OR_RETURN(auto policy, make_eviction_policy(options.eviction_policy));
+  const std::optional<BrickBoundKind> bound_kind = brick_bound_from_name(options.brick_bounds);
+  if (!bound_kind) {
+    return invalid_argument("unknown brick bound '" + options.brick_bounds + "' (known: aabb, sphere, obb)");
+  }
+  std::vector<BoundingSphere> spheres;
+  std::vector<OrientedBox> boxes;
+  for (const BrickRecord& brick : store->manifest().bricks) {
+    spheres.push_back(brick.sphere);
+    boxes.push_back(brick.obb);
+  }
+  auto bounds = std::make_unique<const BrickBounds>(*bound_kind, std::move(spheres), std::move(boxes),
+                                                       builder->hit_rounding_scale());
   // Before the proxies (which may build and write proxies.bin): a budget no
   // brick-by-brick schedule can work under is the user's error, found now.
   OUTCORE_RETURN_IF_ERROR(check_cache_budget(store->manifest(), *builder, options.cache_bytes));
@@ -70,6 +83,7 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
                                                              std::move(proxies), std::move(proxy_report),
                                                              cache_fits_scene, bricks_budget_holds));
   engine->accel_options_ = std::move(accel_options);
+  engine->bounds_ = std::move(bounds);
   return engine;
 }
 
@@ -106,7 +120,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   const auto start = Clock::now();
   const uint64_t ticks_start = ticks();
   const uint32_t brick_count = store_->brick_count();
-  ProxyGate gate(proxies_.get(), cache_->builder().hit_rounding_scale());
+  ProxyGate gate(proxies_.get(), cache_->builder().hit_rounding_scale(), bounds_.get());
   if (proxies_ != nullptr && options.reorder) gate.track_residency(brick_count, cache_->resident_bricks());
   const CacheCounters counters_before = cache_->counters();
   const std::size_t n = rays.size();

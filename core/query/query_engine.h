@@ -53,6 +53,7 @@
 #include "core/ray/ray_problem.h"
 #include "core/ray/ray_types.h"
 #include "core/store/scene_store.h"
+#include "core/upper/brick_bounds.h"
 #include "core/util/reuse_pool.h"
 
 namespace outcore {
@@ -66,6 +67,9 @@ struct EngineOptions {
   std::string eviction_policy = "lru";
   std::string brick_accel = kDefaultBrickAccel;
   BrickAccelOptions accel_options;
+  // The bound tested before a brick beyond the upper hierarchy's box:
+  // "aabb" (none), "sphere" or "obb" (core/upper/brick_bounds.h).
+  std::string brick_bounds = kDefaultBrickBounds;
   // When set, the cache records every brick acquisition into it
   // (core/cache/access_trace.h); close it after the engine is destroyed.
   std::shared_ptr<AccessTraceWriter> access_trace;
@@ -135,6 +139,7 @@ class QueryEngine {
   const BrickCache& cache() const { return *cache_; }
   // nullptr when proxies are off.
   const ProxySet* proxies() const { return proxies_.get(); }
+  const BrickBounds& brick_bounds() const { return *bounds_; }
   // How the proxies were obtained (loaded from proxies.bin or built).
   const ProxyOpenReport& proxy_report() const { return proxy_report_; }
   // The brick structure's options in effect (the user's).
@@ -157,6 +162,7 @@ class QueryEngine {
   std::shared_ptr<const SceneStore> store_;
   std::unique_ptr<BrickCache> cache_;
   std::unique_ptr<const ProxySet> proxies_;
+  std::unique_ptr<const BrickBounds> bounds_;
   ProxyOpenReport proxy_report_;
   bool cache_fits_scene_;
   uint64_t bricks_budget_holds_;  // the budget over the average brick reservation

@@ -45,7 +45,8 @@ std::string QueryStats::to_text() const {
       buf, sizeof buf,
       "rays %llu (%llu hit, %llu invalid) in %.3f s = %.2f M rays/s\n"
       "  upper: %llu nodes visited, %.3f s first pass, %llu rays entering no brick\n"
-      "  bricks: %llu ray visits (%llu traced ahead), %llu acquisitions (%llu hits, %llu misses), %llu "
+      "  bricks: %llu ray visits (%llu traced ahead, %llu without a hit), %llu acquisitions (%llu hits, %llu "
+      "misses), %llu "
       "builds, %llu evictions\n"
       "  cache: peak %.1f MiB of %.1f MiB budget\n"
       "  time: build/wait %.3f s, brick traversal %.3f s\n",
@@ -54,10 +55,12 @@ std::string QueryStats::to_text() const {
       seconds_total > 0 ? rays / seconds_total / 1e6 : 0.0,
       static_cast<unsigned long long>(upper_nodes_visited), seconds_upper,
       static_cast<unsigned long long>(rays_entering_no_brick), static_cast<unsigned long long>(brick_visits),
-      static_cast<unsigned long long>(rays_traced_ahead), static_cast<unsigned long long>(brick_acquisitions),
-      static_cast<unsigned long long>(cache_hits), static_cast<unsigned long long>(cache_misses),
-      static_cast<unsigned long long>(brick_builds), static_cast<unsigned long long>(evictions),
-      peak_bytes_resident / 1048576.0, cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
+      static_cast<unsigned long long>(rays_traced_ahead),
+      static_cast<unsigned long long>(brick_visits_without_hit),
+      static_cast<unsigned long long>(brick_acquisitions), static_cast<unsigned long long>(cache_hits),
+      static_cast<unsigned long long>(cache_misses), static_cast<unsigned long long>(brick_builds),
+      static_cast<unsigned long long>(evictions), peak_bytes_resident / 1048576.0,
+      cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
   std::string text = buf;
   if (rays_in_brick_set > 0) {
     std::snprintf(buf, sizeof buf,

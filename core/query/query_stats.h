@@ -54,11 +54,18 @@ enum class StatsServer { kNo, kYes };
   X(uint64_t, rays_entering_no_brick,  "",        "rays_entering_no_brick",  kSum, kYes, kNo)       \
   /* (ray, brick) traversals */                                                                     \
   X(uint64_t, brick_visits,            "",        "brick_visits",            kSum, kYes, kYes)      \
+  /* of those, visits that found no hit nearer than the ray had (closest */                        \
+  /* hit) or left the ray unoccluded (any hit): the brick bound's false */                          \
+  /* positives, plus bricks the ray crosses in front of a farther hit */                            \
+  X(uint64_t, brick_visits_without_hit, "",       "brick_visits_without_hit", kSum, kYes, kYes)     \
   /* traced through the resident bricks' one scene (no visits counted) */                           \
   X(uint64_t, rays_in_brick_set,       "",        "rays_in_brick_set",       kSum, kYes, kYes)      \
   /* (ray, brick) candidates tested against a proxy; of those, visits avoided */                    \
   X(uint64_t, proxy_tests,             "",        "proxy_tests",             kSum, kYes, kYes)      \
   X(uint64_t, bricks_skipped_by_proxy, "",        "bricks_skipped_by_proxy", kSum, kYes, kYes)      \
+  /* (ray, brick) candidates the brick bound (--brick-bounds sphere|obb) turned */                  \
+  /* away after the upper hierarchy's box let them in */                                             \
+  X(uint64_t, bricks_skipped_by_bound, "",        "bricks_skipped_by_bound", kSum, kYes, kYes)      \
   /* the engine's resident proxies (0 without) */                                                   \
   X(uint64_t, proxy_bytes,             "",        "proxy_bytes",             kMax, kNo,  kNo)       \
   /* traced at a brick before reaching it (some never do) */                                        \

@@ -43,10 +43,12 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
   stats.seconds_brick = 1.75, stats.seconds_proxy = 2.25, stats.seconds_brick_builds = 2.75;
   stats.seconds_subtree_loads = 3.25;
   stats.rays_entering_no_brick = 99;  // added after the list was made: its number is apart
+  stats.brick_visits_without_hit = 98, stats.bricks_skipped_by_bound = 97;  // so were these
   EXPECT_EQ(stats.to_json(),
             R"({"rays":1,"invalid_rays":2,"rays_hit":3,"upper_nodes_visited":4,"rays_entering_no_brick":99,)"
-            R"("brick_visits":5,)"
-            R"("rays_in_brick_set":6,"proxy_tests":8,"bricks_skipped_by_proxy":9,"proxy_bytes":10,)"
+            R"("brick_visits":5,"brick_visits_without_hit":98,)"
+            R"("rays_in_brick_set":6,"proxy_tests":8,"bricks_skipped_by_proxy":9,)"
+            R"("bricks_skipped_by_bound":97,"proxy_bytes":10,)"
             R"("rays_traced_ahead":7,"brick_acquisitions":11,"cache_hits":12,"cache_misses":13,)"
             R"("brick_builds":14,"evictions":15,"subtree_loads":16,"subtree_loads_checked":17,)"
             R"("subtree_loads_kept":18,"subtree_writes":19,"subtree_rejects":20,"subtree_bytes_read":21,)"
@@ -55,8 +57,9 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
             R"("brick_builds_summed":2.75,"subtree_loads_summed":3.25},"rays_per_second":4})");
   EXPECT_EQ(QueryStats().to_json(),
             R"({"rays":0,"invalid_rays":0,"rays_hit":0,"upper_nodes_visited":0,"rays_entering_no_brick":0,)"
-            R"("brick_visits":0,)"
-            R"("rays_in_brick_set":0,"proxy_tests":0,"bricks_skipped_by_proxy":0,"proxy_bytes":0,)"
+            R"("brick_visits":0,"brick_visits_without_hit":0,)"
+            R"("rays_in_brick_set":0,"proxy_tests":0,"bricks_skipped_by_proxy":0,)"
+            R"("bricks_skipped_by_bound":0,"proxy_bytes":0,)"
             R"("rays_traced_ahead":0,"brick_acquisitions":0,"cache_hits":0,"cache_misses":0,)"
             R"("brick_builds":0,"evictions":0,"subtree_loads":0,"subtree_loads_checked":0,)"
             R"("subtree_loads_kept":0,"subtree_writes":0,"subtree_rejects":0,"subtree_bytes_read":0,)"

@@ -17,8 +17,8 @@
 // scene, saved about 5 ns of CPU per ray that misses the box but added about
 // 10 ns per ray that enters it.
 //
-// A brick the ray cannot hit by its proxy (ProxyGate) is passed over like a
-// traced brick without a hit; one the ray was traced against ahead of its
+// A brick the ray cannot hit by its bound or its proxy (ProxyGate) is passed
+// over like a traced brick without a hit; one the ray was traced against ahead of its
 // turn (trace_ahead.h) is passed over too, its hit (if any) taken now: the
 // visit happens, only earlier.
 //
@@ -43,11 +43,13 @@ constexpr std::size_t kWindow = 4;
 
 // What is known of a window entry the ray has not reached yet: nothing, or
 // the outcome of tracing it there ahead of its turn; values from
-// kAheadHitBase on index the batch's table of such hits.
+// kAheadHitBase on index the batch's table of such hits (closest hit), or
+// kAheadHitBase says the ray was found occluded there (any hit).
 constexpr uint32_t kAheadNone = 0;
-constexpr uint32_t kAheadSkip = 1;    // its proxy says the ray cannot hit it
-constexpr uint32_t kAheadNoGain = 2;  // traced: nothing beats what the ray had then
-constexpr uint32_t kAheadHitBase = 3;
+constexpr uint32_t kAheadSkip = 1;       // its proxy says the ray cannot hit it
+constexpr uint32_t kAheadBoundSkip = 2;  // its bound (--brick-bounds) says so
+constexpr uint32_t kAheadNoGain = 3;     // traced: nothing beats what the ray had then
+constexpr uint32_t kAheadHitBase = 4;
 
 struct RayProgress {
   std::array<BrickKey, kWindow> window;
@@ -122,9 +124,9 @@ struct RayWalk {
     const BrickKey& key = p.window[0];
     p.last = key;
     p.next = 1;
-    if (gate.needs_no_test(key.brick) || gate.may_hit(key.brick, batch.rays[i], batch.horizon(i), counters))
-      return key.brick;
-    ++counters.skipped;
+    const uint64_t skipped_before = counters.skipped_by_bound;
+    if (gate.admits(key.brick, batch.rays[i], batch.horizon(i), counters)) return key.brick;
+    counters.skipped += counters.skipped_by_bound == skipped_before;
     if (demand.tracking()) demand.sub(key.brick);
     return advance(p, i, counters);
   }
@@ -164,9 +166,9 @@ struct RayWalk {
         take_ahead(ahead, i, limit, counters);
         continue;
       }
-      if (gate.needs_no_test(key.brick) || gate.may_hit(key.brick, batch.rays[i], limit, counters))
-        return key.brick;
-      ++counters.skipped;
+      const uint64_t skipped_before = counters.skipped_by_bound;
+      if (gate.admits(key.brick, batch.rays[i], limit, counters)) return key.brick;
+      counters.skipped += counters.skipped_by_bound == skipped_before;
       // Passed over: the ray no longer needs the brick.
       if (demand.tracking()) demand.sub(key.brick);
     }
@@ -175,19 +177,22 @@ struct RayWalk {
  private:
   // The visit to a brick traced ahead: its outcome is taken now.
   void take_ahead(uint32_t ahead, std::size_t i, float& limit, VisitCounters& counters) const {
-    if (ahead == kAheadSkip) {
-      ++counters.skipped;
+    if (ahead == kAheadSkip || ahead == kAheadBoundSkip) {
+      ++(ahead == kAheadSkip ? counters.skipped : counters.skipped_by_bound);
       return;
     }
     ++counters.ahead_visits;
+    bool gained = ahead >= kAheadHitBase;
     if constexpr (kKind == QueryKind::kClosestHit) {
-      if (ahead >= kAheadHitBase) {
+      if (gained) {
         const Hit& found = ahead_hits[ahead - kAheadHitBase];
         Hit& hit = batch.hits[i];
-        if (hit_is_better(found.t, found.geometry_id, found.primitive_id, hit)) hit = found;
+        gained = hit_is_better(found.t, found.geometry_id, found.primitive_id, hit);
+        if (gained) hit = found;
         limit = batch.horizon(i);
       }
     }
+    counters.visits_without_hit += !gained;
   }
 };
 

@@ -106,7 +106,7 @@ std::size_t sweep_round(const RayWalk<kKind>& walk, SweepPins& pins, SweepScratc
     const BrickAccel* accel = pins.accel(brick);
     if (accel == nullptr) continue;  // the batch fails: the error is returned
     const uint64_t trace_start = ticks();
-    walk.batch.trace(*accel, ids);
+    task.counters.visits_without_hit += walk.batch.trace(*accel, ids);
     task.trace_ticks += ticks() - trace_start;
     task.visits += ids.size();
     for (const uint32_t ray : ids) {

@@ -27,7 +27,7 @@ Status run_sequential(StrategyContext<kKind>& ctx) {
          brick = ctx.walk.advance(progress[i], i, counters)) {
       PinnedBrick pin;
       OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx.cache, brick, pin, ctx.tally));
-      batch.trace(pin.accel(), std::span<const uint32_t>(&id, 1));
+      counters.visits_without_hit += batch.trace(pin.accel(), std::span<const uint32_t>(&id, 1));
       ++stats.brick_visits;
     }
     stats.rays_hit += batch.answered_hit(i);

@@ -56,7 +56,12 @@ void TraceAhead<kKind>::trace_range(uint32_t brick, const BrickAccel& accel, std
     std::size_t traced = 0;
     for (std::size_t j = from; j < std::min(end, from + kRayGrain); ++j) {
       const uint32_t ray = rays_[j];
-      if (gate.proxies() != nullptr && !gate.may_hit(brick, batch.rays[ray], batch.horizon(ray), counters)) {
+      const Ray& r = batch.rays[ray];
+      if (!gate.bound_may_hit(brick, r, batch.horizon(ray))) {
+        outcomes[j] = kAheadBoundSkip;
+        continue;
+      }
+      if (gate.proxies() != nullptr && !gate.may_hit(brick, r, batch.horizon(ray), counters)) {
         outcomes[j] = kAheadSkip;
         continue;
       }
@@ -98,8 +103,8 @@ void TraceAhead<kKind>::file(BatchTally& tally) {
         outcome = kAheadHitBase + static_cast<uint32_t>(scratch_.ahead_hits.size());
         scratch_.ahead_hits.push_back(scratch_.ahead_hit_copies[j]);
       } else {
+        // The ray is occluded now; the visit, taken later, counts the hit.
         walk_.batch.occluded[ray] = 1;
-        outcome = kAheadNoGain;
       }
     }
     const RayProgress& p = scratch_.progress[ray];

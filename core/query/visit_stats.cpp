@@ -7,9 +7,11 @@ void BatchTally::add(const VisitCounters& counters) {
   stats.invalid_rays += counters.invalid_rays;
   stats.upper_nodes_visited += counters.nodes;
   stats.brick_visits += counters.ahead_visits;
+  stats.brick_visits_without_hit += counters.visits_without_hit;
   stats.rays_traced_ahead += counters.ahead_traces;
   stats.proxy_tests += counters.proxy_tests;
   stats.bricks_skipped_by_proxy += counters.skipped;
+  stats.bricks_skipped_by_bound += counters.skipped_by_bound;
   stats.rays_entering_no_brick += counters.no_brick;
   proxy_ticks += counters.proxy_ticks;
 }

@@ -42,9 +42,11 @@ inline uint64_t ticks() {
 struct VisitCounters {
   uint64_t nodes = 0;
   uint64_t proxy_tests = 0;
-  uint64_t skipped = 0;
+  uint64_t skipped = 0;           // by the proxy
+  uint64_t skipped_by_bound = 0;  // by the brick bound (--brick-bounds)
   uint64_t proxy_ticks = 0;
   uint64_t ahead_visits = 0;  // visits whose tracing was done ahead of time
+  uint64_t visits_without_hit = 0;
   uint64_t ahead_traces = 0;
   uint64_t rays_hit = 0;      // rays finished with a hit (queued path)
   uint64_t invalid_rays = 0;  // found invalid in the queued path's first pass

@@ -19,6 +19,10 @@ Status BrickWriter::write(std::span<const PackedTriangle> triangles, const Aabb&
   OUTCORE_RETURN_IF_ERROR(file_.pad_to(kBrickAlignment));
   BrickRecord record;
   record.bounds = bounds;
+  bound_scratch_.clear();
+  for (const PackedTriangle& p : triangles) bound_scratch_.push_back(p.tri);
+  record.sphere = BoundingSphere::fit(bound_scratch_);
+  record.obb = OrientedBox::fit(bound_scratch_);
   record.triangle_count = static_cast<uint32_t>(triangles.size());
   record.offset = file_.size();
   record.size_bytes = brick_total_bytes(triangles.size());

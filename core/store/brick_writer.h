@@ -41,6 +41,10 @@ class BrickWriter {
   BufferedFileWriter file_;
   std::vector<char> staging_;
   std::vector<BrickRecord> bricks_;
+  // One brick's triangles for fitting its sphere and oriented box (reused:
+  // at most the largest brick, 36 B a triangle, next to the 44 B a triangle
+  // the pipeline already holds for it).
+  std::vector<Triangle> bound_scratch_;
   std::unique_ptr<ProgressBar> progress_;
 };
 

@@ -11,6 +11,8 @@
 #include <vector>
 
 #include "core/geometry/aabb.h"
+#include "core/geometry/bounding_sphere.h"
+#include "core/geometry/oriented_box.h"
 #include "core/upper/upper_hierarchy.h"
 #include "core/util/status.h"
 
@@ -33,11 +35,15 @@ struct BrickRecord {
   uint64_t offset = 0;      // into bricks.dat
   uint64_t size_bytes = 0;  // header + payload
   uint64_t checksum = 0;    // XXH3-64 of those bytes
+  // Tighter bounds than the box, fitted at pack time around every vertex
+  // (format version 2); trace/serve --brick-bounds picks the one tested.
+  BoundingSphere sphere;
+  OrientedBox obb;
 
   template <class Archive>
   void serialize(Archive& ar) {
     ar(bounds.lo.x, bounds.lo.y, bounds.lo.z, bounds.hi.x, bounds.hi.y, bounds.hi.z, triangle_count, offset,
-       size_bytes, checksum);
+       size_bytes, checksum, sphere, obb);
   }
 };
 
@@ -54,8 +60,8 @@ struct Manifest {
 
   template <class Archive>
   void serialize(Archive& ar) {
-    ar(outcore_version, brick_triangles_target, bounds.lo.x, bounds.lo.y, bounds.lo.z, bounds.hi.x, bounds.hi.y,
-       bounds.hi.z, triangle_count, degenerate_count, inputs, bricks, upper);
+    ar(outcore_version, brick_triangles_target, bounds.lo.x, bounds.lo.y, bounds.lo.z, bounds.hi.x,
+       bounds.hi.y, bounds.hi.z, triangle_count, degenerate_count, inputs, bricks, upper);
   }
 };
 

@@ -191,14 +191,15 @@ TEST_F(SceneStoreTest, TruncatedOrExtendedManifestIsDataLoss) {
 
 TEST_F(SceneStoreTest, OtherFormatVersionIsFailedPreconditionNamingBothVersions) {
   std::string bytes = read_bytes(manifest_path());
-  const uint32_t version = 2;
-  static_assert(kStoreFormatVersion != 2);
+  const uint32_t version = 1;  // the format before the brick bounds
+  static_assert(kStoreFormatVersion != 1);
   std::memcpy(bytes.data() + offsetof(StoreFileHeader, format_version), &version, sizeof version);
   write_bytes(manifest_path(), bytes);
   const auto store = SceneStore::open(store_);
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kFailedPrecondition);
-  EXPECT_TRUE(contains(store.status().message(), "format version 2")) << store.status().message();
+  EXPECT_TRUE(contains(store.status().message(), "format version 1")) << store.status().message();
+  EXPECT_TRUE(contains(store.status().message(), "outcore pack --force")) << store.status().message();
   EXPECT_TRUE(contains(store.status().message(), "format version " + std::to_string(kStoreFormatVersion)))
       << store.status().message();
 }

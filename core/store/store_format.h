@@ -14,7 +14,8 @@
 
 namespace outcore {
 
-inline constexpr uint32_t kStoreFormatVersion = 1;
+// 2: bricks carry a bounding sphere and an oriented box (issue 24).
+inline constexpr uint32_t kStoreFormatVersion = 2;
 inline constexpr char kManifestFileName[] = "manifest.bin";
 inline constexpr char kBrickDataFileName[] = "bricks.dat";
 // The bricks' occupancy proxies (core/proxy/proxy_file.h), cached beside them.

@@ -252,7 +252,7 @@ def test_stats_count_the_rays_answered(client, bounds):
     assert after["resident_bytes"] <= after["cache_budget_bytes"]
     assert after["eviction_policy"]
     # The per-request sums grow by this request's figures.
-    for key in ("brick_visits", "proxy_tests", "bricks_skipped_by_proxy", "rays_traced_ahead"):
+    for key in REQUEST_SUMS:
         assert after[key] - before[key] == client.last_stats[key], key
     assert after["proxy_bytes"] > 0  # proxies are on by default
     # No subtree tier on this server.
@@ -271,7 +271,10 @@ SUBTREE_COUNTS = ("subtree_loads", "subtree_loads_checked", "subtree_loads_kept"
 ENGINE_COUNTS = ("rays", "rays_hit", "invalid_rays", "upper_nodes_visited", "brick_visits", "proxy_tests",
                  "bricks_skipped_by_proxy", "rays_traced_ahead", "brick_acquisitions", "cache_hits",
                  "cache_misses", "brick_builds", "evictions", "subtree_loads", "subtree_writes",
-                 "rays_in_brick_set")
+                 "rays_in_brick_set", "brick_visits_without_hit", "bricks_skipped_by_bound")
+# The per-request sums ServerStats keeps.
+REQUEST_SUMS = ("brick_visits", "brick_visits_without_hit", "proxy_tests", "bricks_skipped_by_proxy",
+                "bricks_skipped_by_bound", "rays_traced_ahead")
 
 
 def test_last_stats_equal_traces_for_the_same_rays_on_a_fresh_cache(store, bounds, tmp_path):
@@ -291,7 +294,29 @@ def test_last_stats_equal_traces_for_the_same_rays_on_a_fresh_cache(store, bound
     assert got["bricks_skipped_by_proxy"] > 0 and got["proxy_tests"] >= got["bricks_skipped_by_proxy"]
     assert 0 < got["seconds_upper"] <= got["seconds_total"]
     assert totals["proxy_bytes"] == want["proxy_bytes"]
-    for key in ("brick_visits", "proxy_tests", "bricks_skipped_by_proxy", "rays_traced_ahead"):
+    for key in REQUEST_SUMS:
+        assert totals[key] == got[key], key
+
+
+@pytest.mark.parametrize("bound", ["sphere", "obb"])
+def test_brick_bounds_answer_as_trace_and_count_what_they_turn_away(store, bounds, tmp_path, bound):
+    # serve --brick-bounds: the same answers as trace without a bound, and the
+    # same figures as trace with it (one engine thread each, fresh caches).
+    rays = make_rays(bounds, 3000, seed=72)
+    server = Server(store, "--threads", 1, "--brick-bounds", bound)
+    try:
+        with outcore.SceneClient(server.address, timeout=60) as client:
+            result = client.cast_rays(rays)
+            got = client.last_stats
+            totals = client.stats()
+    finally:
+        assert server.stop() == 0
+    assert_equals_trace_bitwise(result, trace(store, rays, tmp_path))
+    want = trace_stats(store, rays, tmp_path, "--threads", 1, "--brick-bounds", bound)
+    assert {key: got[key] for key in ENGINE_COUNTS} == {key: want[key] for key in ENGINE_COUNTS}
+    assert got["bricks_skipped_by_bound"] > 0
+    assert 0 < got["brick_visits_without_hit"] <= got["brick_visits"]
+    for key in REQUEST_SUMS:
         assert totals[key] == got[key], key
 
 

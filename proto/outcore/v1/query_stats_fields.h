@@ -40,5 +40,7 @@
   X(rays_in_brick_set)              \
   X(subtree_loads_checked)          \
   X(subtree_loads_kept)             \
-  X(rays_entering_no_brick)
+  X(rays_entering_no_brick)         \
+  X(brick_visits_without_hit)       \
+  X(bricks_skipped_by_bound)
 // clang-format on

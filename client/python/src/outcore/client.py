@@ -186,7 +186,8 @@ class SceneClient:
             response_deserializer=pb.ServerStats.FromString,
         )
         #: The engine's figures for the last query (QueryStats fields: rays,
-        #: rays_hit, brick_visits, upper_nodes_visited, proxy_tests,
+        #: rays_hit, brick_visits, brick_visits_without_hit,
+        #: bricks_skipped_by_bound, upper_nodes_visited, proxy_tests,
         #: bricks_skipped_by_proxy, rays_traced_ahead, cache_hits,
         #: cache_misses, brick_builds, subtree_loads, subtree_writes,
         #: seconds_total, seconds_upper, seconds_brick, ...; summed over the
@@ -280,8 +281,9 @@ class SceneClient:
         failed_requests, rays, rays_hit, invalid_rays, seconds_tracing; the
         brick cache's (cache_hits, cache_misses, brick_builds, evictions,
         resident_bytes, peak_resident_bytes, cache_budget_bytes, ...); sums
-        over the requests of brick_visits, proxy_tests,
-        bricks_skipped_by_proxy, rays_traced_ahead and rays_in_brick_set;
+        over the requests of brick_visits, brick_visits_without_hit,
+        proxy_tests, bricks_skipped_by_proxy, bricks_skipped_by_bound,
+        rays_traced_ahead and rays_in_brick_set;
         proxy_bytes; and the
         subtree tier's (subtree_dir, "" without one, subtree_loads,
         subtree_loads_checked, subtree_loads_kept, subtree_writes, subtree_rejects, subtree_bytes_read,

@@ -1,0 +1,162 @@
+#!/usr/bin/env python3
+"""Issue 24's benchmark: brick structures and brick bounds, same run.
+
+Structures (--structures, default bvh,kdtree,embree; the first is the base): for each scene, `outcore trace --repeat R` on 1M incoherent and 1M
+camera rays (bench/make_rays.py) with a budget that holds the scene: run 1
+is cold (every brick built: build seconds summed over threads, M triangles/s
+per thread, resident bytes per triangle), runs 2..R warm (median trace
+time). Ratios are against the bvh of the same run.
+
+Bounds (--brick-bounds aabb, sphere, obb, default structure): on the tilted
+city only (its flat layer of copies turned 30 degrees about x, so bricks are
+oblique slabs), warm median time and the figures that show what a bound
+saves: brick visits, visits without a hit, candidates turned away by the
+bound. Proxies are off for this part so that the bound alone decides; with
+--no-proxies the upper hierarchy's box is the only other test.
+
+Scenes: the bunny; `tilted`, gen:city of 400 terrain patches tilted 30
+degrees (~0.5 M triangles, thin oblique geometry, the rotated scene of the
+issue); `city`, the trace benchmark's 15 M-triangle city (not in the default
+set: ~10 minutes a structure).
+
+Usage: .venv/bin/python bench/structure_bench.py [--runs 5] [--rays 1000000]
+       [--scenes bunny,tilted] [--structures bvh,kdtree,embree] [--outcore build/client/outcore] [--work build/bench-structure]
+       [--json rows.json] [--png chart.png]
+"""
+import argparse
+import json
+import os
+import statistics
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from common import OUTCORE, ROOT, make_rays, prepare_store, run  # noqa: E402
+
+SCENES = {
+    "bunny": [os.path.join(ROOT, "tests", "data", "models", "stanford-bunny.obj")],
+    "tilted": ["gen:city?of=(gen:terrain?n=24&size=2&height=0.1)&copies=400&spacing=3&tilt=30"],
+    "city": ["gen:city?of=(gen:sphere?level=5)&copies=732"],
+}
+CACHE_MB = 8192
+
+
+def trace(store, rays_path, runs, extra):
+    """(cold stats, warm median seconds, warm stats) of `outcore trace --repeat runs`."""
+    out = rays_path + ".hits.npy"
+    stats_path = rays_path + ".stats.json"
+    run([OUTCORE, "trace", store, "--rays", rays_path, "-o", out, "--threads", "2", "--repeat", str(runs),
+         "--cache-mb", str(CACHE_MB), "--stats-json", stats_path] + extra)
+    with open(stats_path) as f:
+        stats = json.load(f)
+    stats = stats if isinstance(stats, list) else [stats]
+    if any(s["brick_builds"] > 0 for s in stats[1:]):
+        sys.exit(f"a warm run built bricks: raise --cache-mb (now {CACHE_MB})")
+    return stats[0], statistics.median(s["seconds"]["total"] for s in stats[1:]), stats[-1]
+
+
+def structure_rows(name, store, info, rays, runs, structures):
+    rows = []
+    triangles = json.load(open(info))["triangle_count"]
+    for kind, path in rays.items():
+        base = None
+        for accel in structures:
+            cold, warm, _ = trace(store, path, runs, ["--brick-accel", accel])
+            build = cold["seconds"]["brick_builds_summed"]
+            row = {"part": "structure", "scene": name, "rays": kind, "accel": accel,
+                   "warm_s": warm, "build_s_summed": build,
+                   "build_mtris_per_s_per_thread": triangles / build / 1e6 if build > 0 else None,
+                   "bytes_per_triangle": cold["peak_bytes_resident"] / triangles}
+            base = base or row
+            row["warm_vs_bvh"] = warm / base["warm_s"]
+            row["build_vs_bvh"] = build / base["build_s_summed"] if base["build_s_summed"] else None
+            rows.append(row)
+            print(f"{name:7s} {kind:10s} {accel:7s} warm {warm:.3f} s ({row['warm_vs_bvh']:.2f}x bvh)  "
+                  f"build {build:.3f} s summed ({row['build_vs_bvh'] or 0:.2f}x bvh)  "
+                  f"{row['bytes_per_triangle']:.0f} B/tri", flush=True)
+    return rows
+
+
+def bound_rows(name, store, rays, runs):
+    rows = []
+    for kind, path in rays.items():
+        base = None
+        for bound in ("aabb", "sphere", "obb"):
+            _, warm, stats = trace(store, path, runs, ["--brick-bounds", bound, "--no-proxies"])
+            row = {"part": "bounds", "scene": name, "rays": kind, "bound": bound, "warm_s": warm,
+                   "brick_visits": stats["brick_visits"],
+                   "brick_visits_without_hit": stats["brick_visits_without_hit"],
+                   "bricks_skipped_by_bound": stats["bricks_skipped_by_bound"]}
+            base = base or row
+            row["warm_vs_aabb"] = warm / base["warm_s"]
+            row["without_hit_vs_aabb"] = (row["brick_visits_without_hit"] / base["brick_visits_without_hit"]
+                                          if base["brick_visits_without_hit"] else None)
+            rows.append(row)
+            print(f"{name:7s} {kind:10s} {bound:6s} warm {warm:.3f} s ({row['warm_vs_aabb']:.2f}x aabb)  "
+                  f"visits {row['brick_visits']}  without hit {row['brick_visits_without_hit']} "
+                  f"({row['without_hit_vs_aabb'] or 0:.2f}x aabb)  turned away {row['bricks_skipped_by_bound']}",
+                  flush=True)
+    return rows
+
+
+def draw(rows, png):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    bounds = [r for r in rows if r["part"] == "bounds"]
+    structures = [r for r in rows if r["part"] == "structure"]
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
+    labels = [f"{r['scene']}\n{r['rays']}\n{r['accel']}" for r in structures]
+    axes[0].bar(range(len(structures)), [r["warm_vs_bvh"] for r in structures])
+    axes[0].set_xticks(range(len(structures)), labels, fontsize=6)
+    axes[0].axhline(1.0, color="grey", lw=0.8)
+    axes[0].set_title("warm trace time, x the bvh (lower is faster)")
+    labels = [f"{r['rays']}\n{r['bound']}" for r in bounds]
+    axes[1].bar(range(len(bounds)), [r["without_hit_vs_aabb"] or 0 for r in bounds], label="visits without a hit")
+    axes[1].plot(range(len(bounds)), [r["warm_vs_aabb"] for r in bounds], "ro", label="warm time")
+    axes[1].set_xticks(range(len(bounds)), labels, fontsize=7)
+    axes[1].axhline(1.0, color="grey", lw=0.8)
+    axes[1].set_title("brick bounds on the tilted city, x aabb")
+    axes[1].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+
+
+def main():
+    global OUTCORE, CACHE_MB
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--rays", type=int, default=1_000_000)
+    ap.add_argument("--scenes", default="bunny,tilted")
+    ap.add_argument("--structures", default="bvh,kdtree,embree", help="the first is the ratios' base")
+    ap.add_argument("--work", default=os.path.join(ROOT, "build", "bench-structure"))
+    ap.add_argument("--outcore", default=OUTCORE)
+    ap.add_argument("--cache-mb", type=int, default=CACHE_MB)
+    ap.add_argument("--json")
+    ap.add_argument("--png")
+    a = ap.parse_args()
+    OUTCORE = os.path.abspath(a.outcore)
+    CACHE_MB = a.cache_mb
+    os.makedirs(a.work, exist_ok=True)
+    rows = []
+    for name in a.scenes.split(","):
+        store, info = prepare_store(OUTCORE, a.work, name, SCENES[name])
+        rays = {}
+        for kind in ("incoherent", "camera"):
+            path = os.path.join(a.work, f"{name}-{kind}-{a.rays}.npy")
+            if not os.path.exists(path):
+                make_rays(info, kind, a.rays, path)
+            rays[kind] = path
+        rows += structure_rows(name, store, info, rays, a.runs, a.structures.split(","))
+        if name == "tilted":
+            rows += bound_rows(name, store, rays, a.runs)
+    load = os.getloadavg()[0]
+    print(f"load average at the end: {load:.2f}")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump({"rows": rows, "load_end": load, "runs": a.runs, "rays": a.rays}, f, indent=1)
+    if a.png:
+        draw(rows, a.png)
+
+
+if __name__ == "__main__":
+    main()
