@@ -38,9 +38,7 @@ struct KdTreeBrickConfig {
 
 class KdTreeBrickAccel final : public BrickAccel {
  public:
-  // Node indices and reference counts must fit 30 bits (kMaxKdIndex) under
-  // the builder's budgets (16 nodes a triangle at most).
-  static constexpr uint64_t kMaxTriangles = 1u << 24;
+  static constexpr uint64_t kMaxTriangles = KdTreeBuilder::kMaxTriangles;
   static constexpr uint64_t kOverheadBytes = 8192;
 
   // Consumes the brick. INVALID_ARGUMENT when ids and triangles differ in

@@ -46,6 +46,10 @@ class KdTreeBuilder {
   };
 
   static constexpr uint64_t kMaxReferencesPerTriangle = 4;
+  // Triangles a build takes: an event keeps its triangle in 24 bits, and
+  // node indices and reference counts must fit 30 bits (kMaxKdIndex) under
+  // the budgets (16 nodes a triangle at most).
+  static constexpr uint64_t kMaxTriangles = uint64_t{1} << 24;
 
   struct Result {
     KdTree tree;
