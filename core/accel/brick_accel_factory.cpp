@@ -4,6 +4,7 @@
 #include <cmath>
 #include <string>
 
+#include "core/accel/bsp/bsp_brick.h"
 #include "core/accel/bvh/bvh_brick.h"
 #include "core/accel/embree_brick.h"
 #include "core/accel/kdtree/kd_tree_brick.h"
@@ -138,6 +139,38 @@ Expected<std::unique_ptr<BrickBuilder>> make_kdtree_builder(const BrickAccelOpti
   return std::unique_ptr<BrickBuilder>(new KdTreeBrickBuilder(config));
 }
 
+// Defaults: watertight and BspTreeBuilder::Config's (the kd-tree's costs,
+// all 13 directions).
+Expected<std::unique_ptr<BrickBuilder>> make_bsp_builder(const BrickAccelOptions& options) {
+  BspBrickConfig config;
+  BspTreeBuilder::Config& b = config.builder;
+  for (const auto& [key, value] : options) {
+    if (key == "triangle_test") {
+      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("bsp", value, config.triangle_test));
+    } else if (key == "max_depth" || key == "directions") {
+      if (!parse_number(value, key == "max_depth" ? b.max_depth : b.directions)) {
+        return invalid_argument("brick accel bsp: option " + key + " must be a whole number, got '" + value +
+                                "'");
+      }
+    } else if (key == "traversal_cost" || key == "intersection_cost" || key == "empty_bonus") {
+      float number = 0;
+      if (!parse_number(value, number) || !std::isfinite(number)) {
+        return invalid_argument("brick accel bsp: option " + key + " must be a number, got '" + value + "'");
+      }
+      (key == "traversal_cost"      ? b.traversal_cost
+       : key == "intersection_cost" ? b.intersection_cost
+                                    : b.empty_bonus) = number;
+    } else {
+      return invalid_argument("brick accel bsp: unknown option '" + key +
+                              "' (known: triangle_test, traversal_cost, intersection_cost, empty_bonus, "
+                              "max_depth, directions)");
+    }
+  }
+  const Status valid = b.validate();
+  if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
+  return std::unique_ptr<BrickBuilder>(new BspBrickBuilder(config));
+}
+
 Expected<std::unique_ptr<BrickBuilder>> make_reference_builder(const BrickAccelOptions& options) {
   if (!options.empty()) {
     return invalid_argument("brick accel reference: unknown option '" + options.begin()->first +
@@ -153,9 +186,8 @@ struct BrickStructureEntry {
   Expected<std::unique_ptr<BrickBuilder>> (*make)(const BrickAccelOptions& options);
 };
 constexpr BrickStructureEntry kBrickStructures[] = {
-    {"embree", make_embree_builder},
-    {"bvh", make_bvh_builder},
-    {"kdtree", make_kdtree_builder},
+    {"embree", make_embree_builder},       {"bvh", make_bvh_builder},
+    {"kdtree", make_kdtree_builder},       {"bsp", make_bsp_builder},
     {"reference", make_reference_builder},
 };
 

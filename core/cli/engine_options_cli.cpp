@@ -46,9 +46,9 @@ Status apply_proxy_options(const EngineCliOptions& cli, EngineOptions& options) 
 // --triangle-test and --reference, once options.accel_options holds --accel-opt.
 Status apply_brick_structure_choices(const EngineCliOptions& cli, EngineOptions& options) {
   if (!cli.triangle_test.empty()) {
-    if (cli.brick_accel != "bvh" && cli.brick_accel != "kdtree") {
-      return invalid_argument("--triangle-test needs --brick-accel bvh or kdtree (got '" + cli.brick_accel +
-                              "')");
+    if (cli.brick_accel != "bvh" && cli.brick_accel != "kdtree" && cli.brick_accel != "bsp") {
+      return invalid_argument("--triangle-test needs --brick-accel bvh, kdtree or bsp (got '" +
+                              cli.brick_accel + "')");
     }
     if (!options.accel_options.emplace("triangle_test", cli.triangle_test).second) {
       return invalid_argument("--triangle-test and --accel-opt triangle_test=... both given");

@@ -61,7 +61,7 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
   cases[4].message = "--accel-opt 'a' given twice";
   cases[5].cli.brick_accel = "embree";
   cases[5].cli.triangle_test = "mt";
-  cases[5].message = "--triangle-test needs --brick-accel bvh or kdtree (got 'embree')";
+  cases[5].message = "--triangle-test needs --brick-accel bvh, kdtree or bsp (got 'embree')";
   cases[6].cli.reference = true;
   cases[6].cli.brick_accel = "embree";
   cases[6].message = "--reference chooses the brick structure itself";

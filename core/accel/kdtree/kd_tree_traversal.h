@@ -17,6 +17,11 @@
 // just past a plane (in the widened part of the previous cell), or a tie at
 // a vertex on the plane, never hides a nearer or equal one in the next cell.
 //
+// The walk itself (kd_detail::walk) is shared with the BSP tree: it is
+// templated on the node type and on a Planes policy that says how the ray
+// meets a node's plane (AxisPlanes here; bsp_tree_traversal.h's
+// DirectionPlanes for planes of other orientations).
+//
 // Thread-safety: pure functions over an immutable tree.
 #pragma once
 
@@ -40,72 +45,80 @@ inline float widen_up(float t) {
   return std::max(t * bvh_detail::kWidenDown, t * bvh_detail::kWidenUp);
 }
 
-// Calls leaf(first, count, limit) for the leaves the segment [tmin, limit]
-// may touch, front to back; leaf returns true to stop the walk (any hit).
-// `limit` is the best hit so far (leaf lowers it).
-template <class Leaf>
-inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& limit, Leaf&& leaf) {
-  if (tree.nodes.empty()) return;
-  float entry;
-  const bvh_detail::BoxRay box_ray(ray);
-  if (!bvh_detail::box_hit(box_ray, tree.bounds, tmin, limit, entry)) return;
-  // The segment within the bounds (box_hit's entry is a widened lower bound;
-  // the exit is recomputed the same way).
-  float segment_min = std::max(tmin, entry), segment_max = limit;
-  {
-    float exit_hi = limit;
-    for (int axis = 0; axis < 3; ++axis) {
-      const float t0 = (tree.bounds.lo[axis] - ray.origin[axis]) * box_ray.inverse_direction[axis];
-      const float t1 = (tree.bounds.hi[axis] - ray.origin[axis]) * box_ray.inverse_direction[axis];
-      if (t0 != t0 || t1 != t1) continue;
-      exit_hi = std::min(exit_hi, widen_up(std::max(t0, t1)));
+// How a ray's segment meets an inner node's plane (what a Planes policy
+// reports): it stays on one side (parallel to the plane), lies in the plane
+// (both children get the whole segment), or crosses it at [lo, hi] (a
+// widened interval of t). `forward` says the child below comes first.
+enum class PlaneCrossing { kBelowOnly, kAboveOnly, kInPlane, kCrosses };
+
+// The kd-tree's planes: one axis per node, the crossing from the ray's
+// reciprocal direction (the classic walk, float throughout).
+struct AxisPlanes {
+  const Ray& ray;
+  const Vec3f& inverse_direction;
+
+  PlaneCrossing cross(const KdNode& node, float& lo, float& hi, bool& forward) const {
+    const int axis = node.axis();
+    const float split = node.split();
+    const float o = ray.origin[axis], d = ray.direction[axis];
+    if (d == 0.0f) {
+      // Parallel to the plane: the side of the origin, or both when in it.
+      forward = true;
+      if (o < split) return PlaneCrossing::kBelowOnly;
+      if (o > split) return PlaneCrossing::kAboveOnly;
+      return PlaneCrossing::kInPlane;
     }
-    segment_max = exit_hi;
+    forward = d > 0.0f;
+    const float t_split = (split - o) * inverse_direction[axis];
+    if (t_split != t_split) return PlaneCrossing::kInPlane;  // 0 * inf: the ray lies in the plane
+    lo = widen_down(t_split);
+    hi = widen_up(t_split);
+    return PlaneCrossing::kCrosses;
   }
+};
+
+// The walk shared by the kd-tree and the BSP tree (bsp_tree_traversal.h):
+// Node has is_leaf(), above_child() (the child below is the next node),
+// first() and count(); Planes::cross() says how the segment meets a node's
+// plane. Calls leaf(first, count, limit) for the leaves the segment
+// [t0, t1] may touch, front to back; leaf returns true to stop the walk (any
+// hit). `limit` is the best hit so far (leaf lowers it). kMaxDepth bounds the
+// tree's depth (one push per level: the stack cannot overflow).
+template <uint32_t kMaxDepth, class Node, class Planes, class Leaf>
+inline void walk(const Node* nodes, const Planes& planes, float t0, float t1, float& limit, Leaf&& leaf) {
   struct Pending {
     uint32_t node;
     float tmin, tmax;
   };
-  std::array<Pending, kMaxKdDepth> stack;
+  std::array<Pending, kMaxDepth> stack;
   uint32_t top = 0;
   uint32_t index = 0;
-  float t0 = segment_min, t1 = segment_max;
-  const KdNode* nodes = tree.nodes.data();
   while (true) {
     if (t0 <= limit) {
-      const KdNode& node = nodes[index];
+      const Node& node = nodes[index];
       if (!node.is_leaf()) {
-        const int axis = node.axis();
-        const float split = node.split();
-        const float o = ray.origin[axis], d = ray.direction[axis];
         const uint32_t below = index + 1, above = node.above_child();
-        if (d == 0.0f) {
-          // Parallel to the plane: the side of the origin, or both when in it.
-          if (o < split) {
-            index = below;
-          } else if (o > split) {
-            index = above;
-          } else {
-            stack[top++] = {above, t0, t1};
-            index = below;
-          }
+        float lo = 0, hi = 0;
+        bool forward = true;
+        const PlaneCrossing crossing = planes.cross(node, lo, hi, forward);
+        if (crossing == PlaneCrossing::kBelowOnly) {
+          index = below;
           continue;
         }
-        const uint32_t first = d > 0.0f ? below : above;
-        const uint32_t second = d > 0.0f ? above : below;
-        const float t_split = (split - o) * box_ray.inverse_direction[axis];
-        if (t_split != t_split) {  // 0 * inf: the ray lies in the plane
+        if (crossing == PlaneCrossing::kAboveOnly) {
+          index = above;
+          continue;
+        }
+        const uint32_t first = forward ? below : above;
+        const uint32_t second = forward ? above : below;
+        if (crossing == PlaneCrossing::kInPlane) {
           stack[top++] = {second, t0, t1};
           index = first;
-          continue;
-        }
-        const float lo = widen_down(t_split), hi = widen_up(t_split);
-        if (lo > t1) {
+        } else if (lo > t1) {
           index = first;
         } else if (hi < t0) {
           index = second;
         } else {
-          // Depth <= kMaxKdDepth and one push per level: no overflow.
           stack[top++] = {second, std::max(t0, lo), t1};
           index = first;
           t1 = std::min(t1, hi);
@@ -130,18 +143,50 @@ inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& 
   }
 }
 
-}  // namespace kd_detail
+// The part of [tmin, limit] within `bounds` (widened, as box_hit), or false
+// when the segment misses them.
+inline bool clip_to_bounds(const Aabb& bounds, const Ray& ray, const bvh_detail::BoxRay& box_ray, float tmin,
+                           float limit, float& segment_min, float& segment_max) {
+  float entry;
+  if (!bvh_detail::box_hit(box_ray, bounds, tmin, limit, entry)) return false;
+  // box_hit's entry is a widened lower bound; the exit is recomputed the
+  // same way.
+  segment_min = std::max(tmin, entry);
+  float exit_hi = limit;
+  for (int axis = 0; axis < 3; ++axis) {
+    const float t0 = (bounds.lo[axis] - ray.origin[axis]) * box_ray.inverse_direction[axis];
+    const float t1 = (bounds.hi[axis] - ray.origin[axis]) * box_ray.inverse_direction[axis];
+    if (t0 != t0 || t1 != t1) continue;
+    exit_hi = std::min(exit_hi, widen_up(std::max(t0, t1)));
+  }
+  segment_max = exit_hi;
+  return true;
+}
 
-// Closest hit of `ray` over (tnear, min(tfar, best.t)], replacing best when a
-// triangle beats it by hit_is_better(). Returns whether best changed.
-template <class Test>
-bool kd_closest_hit(const KdTreeView& tree, const Ray& ray, Hit& best) {
+// Calls leaf(first, count, limit) for the leaves the segment [tmin, limit]
+// may touch, front to back; leaf returns true to stop the walk (any hit).
+// `limit` is the best hit so far (leaf lowers it).
+template <class Leaf>
+inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& limit, Leaf&& leaf) {
+  if (tree.nodes.empty()) return;
+  const bvh_detail::BoxRay box_ray(ray);
+  float segment_min, segment_max;
+  if (!clip_to_bounds(tree.bounds, ray, box_ray, tmin, limit, segment_min, segment_max)) return;
+  const AxisPlanes planes{ray, box_ray.inverse_direction};
+  walk<kMaxKdDepth>(tree.nodes.data(), planes, segment_min, segment_max, limit, leaf);
+}
+
+// Closest and any hit over the leaves a tree's traversal visits, shared by
+// the kd-tree and the BSP tree: walk(tmin, limit, leaf) runs the tree's
+// traverse(); the leaves' references index tree.refs.
+template <class Test, class View, class Walk>
+bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk) {
   float limit = ray.tfar < best.t ? ray.tfar : best.t;
   if (!(limit > ray.tnear)) return false;
   const typename Test::Prepared prepared = Test::prepare(ray);
   uint32_t found = kInvalidId;
   TriangleHit found_hit{};
-  kd_detail::traverse(tree, ray, ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
+  walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
     for (uint32_t k = first; k < first + count; ++k) {
       const uint32_t tri = tree.refs[k];
       TriangleHit h;
@@ -164,14 +209,13 @@ bool kd_closest_hit(const KdTreeView& tree, const Ray& ray, Hit& best) {
   return true;
 }
 
-// Any hit of `ray` in (tnear, tfar]; stops at the first.
-template <class Test>
-bool kd_any_hit(const KdTreeView& tree, const Ray& ray) {
+template <class Test, class View, class Walk>
+bool any_hit(const View& tree, const Ray& ray, Walk&& walk) {
   float limit = ray.tfar;
   if (!(limit > ray.tnear)) return false;
   const typename Test::Prepared prepared = Test::prepare(ray);
   bool hit = false;
-  kd_detail::traverse(tree, ray, ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
+  walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
     for (uint32_t k = first; k < first + count; ++k) {
       TriangleHit h;
       if (Test::hit(prepared, tree.triangles[tree.refs[k]], ray.tnear, best_t, h)) {
@@ -183,6 +227,25 @@ bool kd_any_hit(const KdTreeView& tree, const Ray& ray) {
     return false;
   });
   return hit;
+}
+
+}  // namespace kd_detail
+
+// Closest hit of `ray` over (tnear, min(tfar, best.t)], replacing best when a
+// triangle beats it by hit_is_better(). Returns whether best changed.
+template <class Test>
+bool kd_closest_hit(const KdTreeView& tree, const Ray& ray, Hit& best) {
+  return kd_detail::closest_hit<Test>(tree, ray, best, [&](float tmin, float& limit, auto&& leaf) {
+    kd_detail::traverse(tree, ray, tmin, limit, leaf);
+  });
+}
+
+// Any hit of `ray` in (tnear, tfar]; stops at the first.
+template <class Test>
+bool kd_any_hit(const KdTreeView& tree, const Ray& ray) {
+  return kd_detail::any_hit<Test>(tree, ray, [&](float tmin, float& limit, auto&& leaf) {
+    kd_detail::traverse(tree, ray, tmin, limit, leaf);
+  });
 }
 
 }  // namespace outcore
