@@ -19,4 +19,17 @@ Status check_brick_build_input(const BrickData& brick, const std::string& contex
   return Status::Ok();
 }
 
+void keep_usable_triangles(BrickData& brick) {
+  uint64_t kept = 0;
+  for (uint64_t k = 0; k < brick.triangles.size(); ++k) {
+    const Triangle& tri = brick.triangles[k];
+    if (!tri.is_finite() || tri.is_degenerate()) continue;
+    brick.triangles[kept] = tri;
+    brick.ids[kept] = brick.ids[k];
+    ++kept;
+  }
+  brick.triangles.resize(kept);
+  brick.ids.resize(kept);
+}
+
 }  // namespace outcore

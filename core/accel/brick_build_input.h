@@ -19,4 +19,8 @@ std::string brick_build_context(const BrickData& brick, std::string_view structu
 // `context`.
 Status check_brick_build_input(const BrickData& brick, const std::string& context, uint64_t max_triangles);
 
+// Keeps only the triangles that can be hit (finite, not degenerate) and their
+// ids, in input order, compacted in place (the brick's own vectors are kept).
+void keep_usable_triangles(BrickData& brick);
+
 }  // namespace outcore

@@ -20,18 +20,8 @@ Expected<std::unique_ptr<ReferenceBrickAccel>> ReferenceBrickAccel::build(BrickD
   if (n > 0xfffffffeu) return out_of_range(what + ": too many triangles");
   std::unique_ptr<ReferenceBrickAccel> accel(new ReferenceBrickAccel());
   accel->triangle_count_ = static_cast<uint32_t>(n);
-  // Compacted in place: the brick's own vectors are kept.
-  uint64_t kept = 0;
-  for (uint64_t k = 0; k < n; ++k) {
-    const Triangle& tri = brick.triangles[k];
-    if (!tri.is_finite() || tri.is_degenerate()) continue;
-    brick.triangles[kept] = tri;
-    brick.ids[kept] = brick.ids[k];
-    ++kept;
-  }
-  brick.triangles.resize(kept);
-  brick.ids.resize(kept);
-  accel->normals_.reserve(kept);
+  keep_usable_triangles(brick);
+  accel->normals_.reserve(brick.triangles.size());
   for (const Triangle& tri : brick.triangles) {
     const Vec3d v0(tri.v0), v1(tri.v1), v2(tri.v2);
     accel->normals_.push_back(Vec3f(normalize(cross(v1 - v0, v2 - v0))));

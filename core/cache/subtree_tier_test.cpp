@@ -483,10 +483,11 @@ UnlimitedRun run_unlimited(const std::string& store, const EngineOptions& option
 }
 
 // Every structure with a serialiser, with every triangle test for the bvh
-// and the default for the kd-tree (its serialiser writes the test as a byte,
+// and one or two for the split-plane trees (its serialiser writes the test as a byte,
 // as the bvh's does).
 constexpr std::pair<const char*, const char*> kTierStructuresAndTests[] = {
-    {"bvh", "mt"}, {"bvh", "watertight"}, {"bvh", "double"}, {"kdtree", "watertight"}, {"kdtree", "mt"}};
+    {"bvh", "mt"},    {"bvh", "watertight"}, {"bvh", "double"}, {"kdtree", "watertight"},
+    {"kdtree", "mt"}, {"bsp", "watertight"}};
 
 TEST(SubtreeTierEngine, TinyBudgetWithTheTierAnswersLikeAnUnlimitedBudget) {
   const auto scene = testing::pack_test_scene(
@@ -505,10 +506,10 @@ TEST(SubtreeTierEngine, TinyBudgetWithTheTierAnswersLikeAnUnlimitedBudget) {
     const uint64_t most = unlimited.largest_reservation;
 
     testing::TempDir tier;
-    // Two reservations hold several bvh bricks; a kd-tree's reservation
-    // covers its build's events (~10x the built tree), so one reservation,
+    // Two reservations hold several bvh bricks; a split-plane tree's
+    // reservation covers its build's events (~10x the built tree), so one,
     // the smallest budget the engine accepts, is what makes it evict.
-    options.cache_bytes = (std::string(structure) == "kdtree" ? 1 : 2) * most;
+    options.cache_bytes = (std::string(structure) == "bvh" ? 2 : 1) * most;
     options.subtree_dir = tier.path();
     for (int process = 0; process < 2; ++process) {  // a cold directory, then a warm one
       auto engine = QueryEngine::open(scene->path, options);

@@ -67,7 +67,7 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
   cases[6].message = "--reference chooses the brick structure itself";
   cases[7].cli.brick_accel = "embree";
   cases[7].cli.subtree.dir = "/tmp/x";
-  cases[7].message = "--subtree-dir needs --brick-accel bvh|kdtree (got 'embree'";
+  cases[7].message = "--subtree-dir needs --brick-accel bvh|kdtree|bsp (got 'embree'";
   cases[8].cli.brick_bounds = "kdop";
   cases[8].message = "--brick-bounds must be aabb, sphere or obb, got 'kdop'";
   for (const Case& c : cases) {

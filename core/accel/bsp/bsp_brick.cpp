@@ -4,26 +4,11 @@
 #include <utility>
 
 #include "core/accel/brick_build_input.h"
+#include "core/accel/bsp/bsp_brick_serializer.h"
 #include "core/accel/bsp/bsp_tree_traversal.h"
-#include "core/accel/bvh/double_triangle_test.h"
-#include "core/accel/bvh/mt_triangle_test.h"
-#include "core/accel/bvh/watertight_triangle_test.h"
+#include "core/accel/bvh/scalar_triangle_test_dispatch.h"
 
 namespace outcore {
-namespace {
-
-// Calls fn.template operator()<Test>() with the scalar test of `test`: the
-// one switch per brick call.
-template <class Fn>
-void with_test(TriangleTest test, Fn&& fn) {
-  switch (test) {
-    case TriangleTest::kMt: return fn.template operator()<MtTriangleTest>();
-    case TriangleTest::kWatertight: return fn.template operator()<WatertightTriangleTest>();
-    case TriangleTest::kDouble: return fn.template operator()<DoubleTriangleTest>();
-  }
-}
-
-}  // namespace
 
 Expected<std::unique_ptr<BspBrickAccel>> BspBrickAccel::build(BrickData&& brick,
                                                               const BspBrickConfig& config) {
@@ -37,22 +22,24 @@ Expected<std::unique_ptr<BspBrickAccel>> BspBrickAccel::build(BrickData&& brick,
   std::unique_ptr<BspBrickAccel> accel(new BspBrickAccel());
   accel->test_ = config.triangle_test;
   accel->triangle_count_ = static_cast<uint32_t>(n);
-  uint64_t kept = 0;
-  for (uint64_t k = 0; k < n; ++k) {
-    const Triangle& tri = brick.triangles[k];
-    if (!tri.is_finite() || tri.is_degenerate()) continue;
-    brick.triangles[kept] = tri;
-    brick.ids[kept] = brick.ids[k];
-    ++kept;
-  }
-  brick.triangles.resize(kept);
-  brick.ids.resize(kept);
+  accel->brick_id_ = brick.brick_id;
+  keep_usable_triangles(brick);
   const uint64_t input_bytes = brick.memory_bytes();
   BspTreeBuilder::Result built = BspTreeBuilder::build(std::move(brick.triangles), brick.ids, config.builder);
   brick.ids = {};
   accel->tree_ = std::move(built.tree);
   accel->build_peak_bytes_ = input_bytes + built.peak_bytes + accel->tree_.memory_bytes() + kOverheadBytes;
   accel->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return accel;
+}
+
+std::unique_ptr<BspBrickAccel> BspBrickAccel::from_tree(BspTree tree, TriangleTest test, uint32_t brick_id,
+                                                        uint32_t triangle_count) {
+  std::unique_ptr<BspBrickAccel> accel(new BspBrickAccel());
+  accel->tree_ = std::move(tree);
+  accel->test_ = test;
+  accel->brick_id_ = brick_id;
+  accel->triangle_count_ = triangle_count;
   return accel;
 }
 
@@ -64,18 +51,27 @@ uint64_t BspBrickAccel::reserve_bytes(uint64_t triangle_count) {
 
 void BspBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
   const BspTreeView view = tree_.view();
-  with_test(test_, [&]<class Test>() {
+  with_scalar_triangle_test(test_, [&]<class Test>() {
     for (const uint32_t i : ray_ids) bsp_closest_hit<Test>(view, rays[i], hits[i]);
   });
 }
 
 void BspBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
   const BspTreeView view = tree_.view();
-  with_test(test_, [&]<class Test>() {
+  with_scalar_triangle_test(test_, [&]<class Test>() {
     for (const uint32_t i : ray_ids) {
       if (occluded[i] == 0 && bsp_any_hit<Test>(view, rays[i])) occluded[i] = 1;
     }
   });
+}
+
+BspBrickBuilder::BspBrickBuilder(const BspBrickConfig& config)
+    : config_(config), serializer_(std::make_unique<BspBrickSerializer>(config)) {}
+
+BspBrickBuilder::~BspBrickBuilder() = default;
+
+const BrickSerializer* BspBrickBuilder::serializer() const {
+  return serializer_.get();
 }
 
 Expected<std::unique_ptr<BrickAccel>> BspBrickBuilder::build(BrickData&& brick) const {

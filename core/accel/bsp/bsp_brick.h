@@ -7,7 +7,7 @@
 // Hits follow the bvh brick's contract (bvh_brick.h): tnear < t <= tfar, the
 // user's ids, Embree's barycentrics, the float64 normal rounded, ties to the
 // smaller (geometry_id, primitive_id); degenerate or non-finite triangles are
-// left out. No serializer yet: BSP bricks are rebuilt, not kept in the
+// left out. BspBrickSerializer (bsp_brick_serializer.h) keeps them in the
 // subtree tier.
 //
 // Memory: memory_bytes() = the tree's arrays (8 B per node, 4 B per
@@ -47,6 +47,10 @@ class BspBrickAccel final : public BrickAccel {
   // Consumes the brick. INVALID_ARGUMENT when ids and triangles differ in
   // count or the config is invalid, OUT_OF_RANGE beyond kMaxTriangles.
   static Expected<std::unique_ptr<BspBrickAccel>> build(BrickData&& brick, const BspBrickConfig& config);
+  // A brick from a tree it owns; the tree must be valid (validate()).
+  // triangle_count: the source brick's, degenerate triangles included.
+  static std::unique_ptr<BspBrickAccel> from_tree(BspTree tree, TriangleTest test, uint32_t brick_id,
+                                                  uint32_t triangle_count);
   static uint64_t reserve_bytes(uint64_t triangle_count);
 
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
@@ -59,6 +63,8 @@ class BspBrickAccel final : public BrickAccel {
   // Beyond BrickAccel (statistics and tests):
   BspTreeView view() const { return tree_.view(); }
   uint64_t build_peak_bytes() const { return build_peak_bytes_; }
+  TriangleTest triangle_test() const { return test_; }
+  uint32_t brick_id() const { return brick_id_; }
 
  private:
   BspBrickAccel() = default;
@@ -66,19 +72,24 @@ class BspBrickAccel final : public BrickAccel {
   BspTree tree_;
   TriangleTest test_ = TriangleTest::kWatertight;
   uint32_t triangle_count_ = 0;  // including the degenerate ones left out
+  uint32_t brick_id_ = 0;
   uint64_t build_peak_bytes_ = 0;
   double build_seconds_ = 0;
 };
 
+class BspBrickSerializer;
+
 class BspBrickBuilder final : public BrickBuilder {
  public:
-  explicit BspBrickBuilder(const BspBrickConfig& config) : config_(config) {}
+  explicit BspBrickBuilder(const BspBrickConfig& config);
+  ~BspBrickBuilder() override;
 
   Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override;
   uint64_t reserve_bytes(uint32_t triangle_count) const override {
     return BspBrickAccel::reserve_bytes(triangle_count);
   }
   const std::string& name() const override;
+  const BrickSerializer* serializer() const override;
   double hit_rounding_scale() const override {
     return config_.triangle_test == TriangleTest::kMt ? kMollerTrumboreHitRounding : kWatertightHitRounding;
   }
@@ -86,6 +97,7 @@ class BspBrickBuilder final : public BrickBuilder {
 
  private:
   BspBrickConfig config_;
+  std::unique_ptr<const BspBrickSerializer> serializer_;  // bsp_brick_serializer.h
 };
 
 }  // namespace outcore

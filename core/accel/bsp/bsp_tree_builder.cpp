@@ -428,8 +428,10 @@ BspTreeBuilder::Result BspTreeBuilder::build(std::vector<Triangle> triangles,
   tree.triangles = std::move(triangles);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run();
+  // Exact capacities: memory_bytes() then equals a reloaded tree's.
   tree.nodes.shrink_to_fit();
   tree.refs.shrink_to_fit();
+  tree.triangles.shrink_to_fit();
   return result;
 }
 

@@ -25,17 +25,7 @@ Expected<std::unique_ptr<BvhBrickAccel>> BvhBrickAccel::build(BrickData&& brick,
   accel->brick_id_ = brick.brick_id;
   accel->triangle_count_ = static_cast<uint32_t>(n);
 
-  // Only the triangles that can be hit, in input order, compacted in place.
-  uint64_t kept = 0;
-  for (uint64_t k = 0; k < n; ++k) {
-    const Triangle& tri = brick.triangles[k];
-    if (!tri.is_finite() || tri.is_degenerate()) continue;
-    brick.triangles[kept] = tri;
-    brick.ids[kept] = brick.ids[k];
-    ++kept;
-  }
-  brick.triangles.resize(kept);
-  brick.ids.resize(kept);
+  keep_usable_triangles(brick);
   const uint64_t input_bytes = brick.memory_bytes();
 
   BinnedSahBuilder::Result binary = BinnedSahBuilder::build(brick.triangles, config.builder);

@@ -4,27 +4,11 @@
 #include <utility>
 
 #include "core/accel/brick_build_input.h"
-#include "core/accel/bvh/double_triangle_test.h"
-#include "core/accel/bvh/mt_triangle_test.h"
-#include "core/accel/bvh/watertight_triangle_test.h"
+#include "core/accel/bvh/scalar_triangle_test_dispatch.h"
 #include "core/accel/kdtree/kd_tree_brick_serializer.h"
 #include "core/accel/kdtree/kd_tree_traversal.h"
 
 namespace outcore {
-namespace {
-
-// Calls fn.template operator()<Test>() with the scalar test of `test`: the
-// one switch per brick call.
-template <class Fn>
-void with_test(TriangleTest test, Fn&& fn) {
-  switch (test) {
-    case TriangleTest::kMt: return fn.template operator()<MtTriangleTest>();
-    case TriangleTest::kWatertight: return fn.template operator()<WatertightTriangleTest>();
-    case TriangleTest::kDouble: return fn.template operator()<DoubleTriangleTest>();
-  }
-}
-
-}  // namespace
 
 Expected<std::unique_ptr<KdTreeBrickAccel>> KdTreeBrickAccel::build(BrickData&& brick,
                                                                     const KdTreeBrickConfig& config) {
@@ -39,16 +23,7 @@ Expected<std::unique_ptr<KdTreeBrickAccel>> KdTreeBrickAccel::build(BrickData&& 
   accel->test_ = config.triangle_test;
   accel->triangle_count_ = static_cast<uint32_t>(n);
   accel->brick_id_ = brick.brick_id;
-  uint64_t kept = 0;
-  for (uint64_t k = 0; k < n; ++k) {
-    const Triangle& tri = brick.triangles[k];
-    if (!tri.is_finite() || tri.is_degenerate()) continue;
-    brick.triangles[kept] = tri;
-    brick.ids[kept] = brick.ids[k];
-    ++kept;
-  }
-  brick.triangles.resize(kept);
-  brick.ids.resize(kept);
+  keep_usable_triangles(brick);
   const uint64_t input_bytes = brick.memory_bytes();
   KdTreeBuilder::Result built = KdTreeBuilder::build(std::move(brick.triangles), brick.ids, config.builder);
   brick.ids = {};
@@ -76,14 +51,14 @@ uint64_t KdTreeBrickAccel::reserve_bytes(uint64_t triangle_count) {
 
 void KdTreeBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
   const KdTreeView view = tree_.view();
-  with_test(test_, [&]<class Test>() {
+  with_scalar_triangle_test(test_, [&]<class Test>() {
     for (const uint32_t i : ray_ids) kd_closest_hit<Test>(view, rays[i], hits[i]);
   });
 }
 
 void KdTreeBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const {
   const KdTreeView view = tree_.view();
-  with_test(test_, [&]<class Test>() {
+  with_scalar_triangle_test(test_, [&]<class Test>() {
     for (const uint32_t i : ray_ids) {
       if (occluded[i] == 0 && kd_any_hit<Test>(view, rays[i])) occluded[i] = 1;
     }

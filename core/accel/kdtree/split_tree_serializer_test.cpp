@@ -1,9 +1,11 @@
-// KdTreeBrickSerializer: a saved and reloaded kdtree brick answers bitwise as
-// the built one (every triangle test, models and generator scenes, degenerate
+// The split-plane trees' serialisers (KdTreeBrickSerializer,
+// BspBrickSerializer; split_tree_serializer.h), each: a saved and reloaded
+// brick answers bitwise as the built one (every triangle test, models and generator scenes, degenerate
 // triangles), reports the same memory and triangle count; truncated, padded,
 // inflated and randomly corrupted payloads are errors or, where the damage
 // leaves a valid tree, load and trace without a crash. Structure keys differ
 // exactly when the config does.
+#include "core/accel/bsp/bsp_brick_serializer.h"
 #include "core/accel/kdtree/kd_tree_brick_serializer.h"
 
 #include <gtest/gtest.h>
@@ -27,19 +29,38 @@ using accel_test::load_brick_from;
 
 constexpr std::size_t kRays = 1500;
 
-KdTreeBrickConfig config_of(TriangleTest test) {
-  KdTreeBrickConfig config;
+struct KdTreeKind {
+  using Config = KdTreeBrickConfig;
+  using Accel = KdTreeBrickAccel;
+  using Serializer = KdTreeBrickSerializer;
+  using Node = KdNode;
+  static constexpr const char* kName = "kdtree";
+  static Node cycle() { return KdNode::inner(0, 0.0f, 0); }
+};
+struct BspKind {
+  using Config = BspBrickConfig;
+  using Accel = BspBrickAccel;
+  using Serializer = BspBrickSerializer;
+  using Node = BspNode;
+  static constexpr const char* kName = "bsp";
+  static Node cycle() { return BspNode::inner(0, 0.0f, 0); }
+};
+
+template <class Kind>
+typename Kind::Config config_of(TriangleTest test) {
+  typename Kind::Config config;
   config.triangle_test = test;
   return config;
 }
 
-std::unique_ptr<KdTreeBrickAccel> build(BrickData brick, const KdTreeBrickConfig& config) {
-  auto accel = KdTreeBrickAccel::build(std::move(brick), config);
+template <class Kind>
+std::unique_ptr<typename Kind::Accel> build(BrickData brick, const typename Kind::Config& config) {
+  auto accel = Kind::Accel::build(std::move(brick), config);
   EXPECT_TRUE(accel.ok()) << accel.status().to_string();
   return std::move(accel).value();
 }
 
-std::string save(const KdTreeBrickSerializer& serializer, const BrickAccel& accel) {
+std::string save(const BrickSerializer& serializer, const BrickAccel& accel) {
   std::ostringstream out;
   const Status saved = serializer.save(accel, out);
   EXPECT_TRUE(saved.ok()) << saved.to_string();
@@ -73,7 +94,13 @@ void expect_same_answers(const BrickAccel& built, const BrickAccel& loaded, cons
   EXPECT_EQ(oa, ob) << what;
 }
 
-TEST(KdTreeBrickSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
+template <class Kind>
+class SplitTreeSerializer : public ::testing::Test {};
+using Kinds = ::testing::Types<KdTreeKind, BspKind>;
+TYPED_TEST_SUITE(SplitTreeSerializer, Kinds);
+
+TYPED_TEST(SplitTreeSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
+  using Kind = TypeParam;
   std::vector<std::pair<std::string, BrickData>> bricks;
   bricks.emplace_back("bunny", load_brick_from(accel_test::bunny_path()));
   bricks.emplace_back("torus", load_brick_from("gen:torus?nu=48&nv=24"));
@@ -82,15 +109,15 @@ TEST(KdTreeBrickSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
     const Aabb bounds = accel_test::bounds_of(brick);
     for (const TriangleTest test : kAllTriangleTests) {
       const std::string what = name + " " + std::string(triangle_test_name(test));
-      const KdTreeBrickSerializer serializer(config_of(test));
+      const typename Kind::Serializer serializer(config_of<Kind>(test));
       BrickData copy = brick;
       copy.brick_id = 17;
-      const auto built = build(std::move(copy), config_of(test));
+      const auto built = build<Kind>(std::move(copy), config_of<Kind>(test));
       EXPECT_EQ(built->brick_id(), 17u);
       const std::string payload = save(serializer, *built);
       auto loaded = serializer.load(unowned(payload), 17, built->triangle_count());
       ASSERT_TRUE(loaded.ok()) << what << ": " << loaded.status().to_string();
-      const auto& kd = dynamic_cast<const KdTreeBrickAccel&>(**loaded);
+      const auto& kd = dynamic_cast<const typename Kind::Accel&>(**loaded);
       EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes()) << what;
       EXPECT_EQ((*loaded)->triangle_count(), built->triangle_count()) << what;
       EXPECT_EQ(kd.brick_id(), 17u) << what;
@@ -105,18 +132,20 @@ TEST(KdTreeBrickSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
   }
 }
 
-TEST(KdTreeBrickSerializer, EmptyBrickRoundTrips) {
-  const KdTreeBrickSerializer serializer(config_of(TriangleTest::kWatertight));
-  const auto built = build(BrickData{}, config_of(TriangleTest::kWatertight));
+TYPED_TEST(SplitTreeSerializer, EmptyBrickRoundTrips) {
+  using Kind = TypeParam;
+  const typename Kind::Serializer serializer(config_of<Kind>(TriangleTest::kWatertight));
+  const auto built = build<Kind>(BrickData{}, config_of<Kind>(TriangleTest::kWatertight));
   auto loaded = serializer.load(unowned(save(serializer, *built)), 0, 0);
   ASSERT_TRUE(loaded.ok()) << loaded.status().to_string();
   EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes());
 }
 
-TEST(KdTreeBrickSerializer, MalformedPayloadsAreErrorsNamingTheBrick) {
+TYPED_TEST(SplitTreeSerializer, MalformedPayloadsAreErrorsNamingTheBrick) {
+  using Kind = TypeParam;
   const BrickData brick = load_brick_from("gen:sphere?level=2");
-  const KdTreeBrickSerializer serializer(config_of(TriangleTest::kWatertight));
-  const auto built = build(brick, config_of(TriangleTest::kWatertight));
+  const typename Kind::Serializer serializer(config_of<Kind>(TriangleTest::kWatertight));
+  const auto built = build<Kind>(brick, config_of<Kind>(TriangleTest::kWatertight));
   const std::string payload = save(serializer, *built);
   const uint32_t n = built->triangle_count();
   const auto expect_error = [&](std::string_view bytes, uint32_t triangles, const std::string& what) {
@@ -143,18 +172,18 @@ TEST(KdTreeBrickSerializer, MalformedPayloadsAreErrorsNamingTheBrick) {
   expect_error(nan_bounds, n, "NaN bounds");
   // The root made its own child: a cycle the walk would never leave.
   std::string cycle = payload;
-  const KdNode self = KdNode::inner(0, 0.0f, 0);
+  const typename Kind::Node self = Kind::cycle();
   std::memcpy(cycle.data() + 64, &self, sizeof(self));
   expect_error(cycle, n, "a node pointing back at the root");
   // A payload saved with another triangle test.
-  const KdTreeBrickSerializer mt(config_of(TriangleTest::kMt));
-  const std::string mt_payload = save(mt, *build(brick, config_of(TriangleTest::kMt)));
+  const typename Kind::Serializer mt(config_of<Kind>(TriangleTest::kMt));
+  const std::string mt_payload = save(mt, *build<Kind>(brick, config_of<Kind>(TriangleTest::kMt)));
   auto wrong = serializer.load(unowned(mt_payload), 0, n);
   ASSERT_FALSE(wrong.ok());
   EXPECT_NE(wrong.status().message().find("triangle test"), std::string::npos) << wrong.status().message();
   // Saving a brick of another config, or of another structure, is refused.
   std::ostringstream out;
-  EXPECT_FALSE(serializer.save(*build(brick, config_of(TriangleTest::kMt)), out).ok());
+  EXPECT_FALSE(serializer.save(*build<Kind>(brick, config_of<Kind>(TriangleTest::kMt)), out).ok());
   auto bvh = make_brick_builder("bvh", {});
   ASSERT_TRUE(bvh.ok());
   auto bvh_brick = (*bvh)->build(BrickData(brick));
@@ -165,10 +194,11 @@ TEST(KdTreeBrickSerializer, MalformedPayloadsAreErrorsNamingTheBrick) {
 // Random byte flips anywhere in the payload: each load is an error or a tree
 // that passes validate(), and tracing a loaded one never crashes (ASan and
 // UBSan in CI see to the "never").
-TEST(KdTreeBrickSerializer, FuzzedPayloadsNeverCrash) {
+TYPED_TEST(SplitTreeSerializer, FuzzedPayloadsNeverCrash) {
+  using Kind = TypeParam;
   const BrickData brick = load_brick_from("gen:torus?nu=24&nv=12");
-  const KdTreeBrickSerializer serializer(config_of(TriangleTest::kWatertight));
-  const auto built = build(brick, config_of(TriangleTest::kWatertight));
+  const typename Kind::Serializer serializer(config_of<Kind>(TriangleTest::kWatertight));
+  const auto built = build<Kind>(brick, config_of<Kind>(TriangleTest::kWatertight));
   const std::string payload = save(serializer, *built);
   const auto rays = rays_for(accel_test::bounds_of(brick), 3);
   std::mt19937_64 rng(11);
@@ -198,31 +228,39 @@ TEST(KdTreeBrickSerializer, FuzzedPayloadsNeverCrash) {
   EXPECT_GT(loaded_count, 0u);
 }
 
-TEST(KdTreeBrickSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {
+TYPED_TEST(SplitTreeSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {
+  using Kind = TypeParam;
+  using Serializer = typename Kind::Serializer;
   std::set<std::string> keys;
   for (const TriangleTest test : kAllTriangleTests)
-    keys.insert(KdTreeBrickSerializer(config_of(test)).structure_key());
-  KdTreeBrickConfig c = config_of(TriangleTest::kWatertight);
+    keys.insert(Serializer(config_of<Kind>(test)).structure_key());
+  typename Kind::Config c = config_of<Kind>(TriangleTest::kWatertight);
   c.builder.traversal_cost = std::nextafter(1.0f, 2.0f);  // the smallest change still differs
-  keys.insert(KdTreeBrickSerializer(c).structure_key());
-  c = config_of(TriangleTest::kWatertight);
+  keys.insert(Serializer(c).structure_key());
+  c = config_of<Kind>(TriangleTest::kWatertight);
   c.builder.intersection_cost = 40.0f;
-  keys.insert(KdTreeBrickSerializer(c).structure_key());
-  c = config_of(TriangleTest::kWatertight);
+  keys.insert(Serializer(c).structure_key());
+  c = config_of<Kind>(TriangleTest::kWatertight);
   c.builder.empty_bonus = 0.25f;
-  keys.insert(KdTreeBrickSerializer(c).structure_key());
-  c = config_of(TriangleTest::kWatertight);
+  keys.insert(Serializer(c).structure_key());
+  c = config_of<Kind>(TriangleTest::kWatertight);
   c.builder.max_depth = 20;
-  keys.insert(KdTreeBrickSerializer(c).structure_key());
+  keys.insert(Serializer(c).structure_key());
   EXPECT_EQ(keys.size(), 7u);
-  EXPECT_EQ(KdTreeBrickSerializer(KdTreeBrickConfig{}).structure_key().rfind("kdtree/", 0), 0u);
+  EXPECT_EQ(Serializer(typename Kind::Config{}).structure_key().rfind(std::string(Kind::kName) + "/", 0), 0u);
 }
 
-TEST(KdTreeBrickSerializer, TheFactorysBuilderHasOne) {
-  auto kd = make_brick_builder("kdtree", {{"triangle_test", "mt"}});
-  ASSERT_TRUE(kd.ok());
-  ASSERT_NE((*kd)->serializer(), nullptr);
-  EXPECT_NE((*kd)->serializer()->structure_key().find("triangle_test=mt"), std::string::npos);
+TEST(SplitTreeSerializerKeys, TheBspKeyNamesItsDirections) {
+  BspBrickConfig seven;
+  seven.builder.directions = 7;
+  EXPECT_NE(BspBrickSerializer(seven).structure_key(), BspBrickSerializer(BspBrickConfig{}).structure_key());
+}
+
+TYPED_TEST(SplitTreeSerializer, TheFactorysBuilderHasOne) {
+  auto made = make_brick_builder(TypeParam::kName, {{"triangle_test", "mt"}});
+  ASSERT_TRUE(made.ok());
+  ASSERT_NE((*made)->serializer(), nullptr);
+  EXPECT_NE((*made)->serializer()->structure_key().find("triangle_test=mt"), std::string::npos);
 }
 
 }  // namespace

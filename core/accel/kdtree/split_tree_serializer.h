@@ -1,0 +1,164 @@
+// SplitTreeSerializer: the subtree tier's payload for the split-plane trees
+// (the kd-tree and the BSP, which share their layout: bounds, 8-byte nodes,
+// references, triangles, hit records), version 1:
+//
+//   offset 0   triangle test (uint8), 7 zero bytes
+//   offset 8   node, reference and triangle counts (uint64 each)
+//   offset 32  the tree's bounds (6 floats: lo xyz, hi xyz), 8 zero bytes
+//   offset 64  the nodes (8 B each), the references (4 B), the triangles
+//              (36 B), the hit records (20 B, one per triangle); nothing after
+//
+// written with cereal's binary archive (little-endian, as the store). load()
+// always copies the arrays (a tree is small next to its build, and a copy
+// keeps memory_bytes() the same as a built brick's) and validates the tree
+// unless the caller vouches for the bytes (SerializedBrick::known_good);
+// every count is checked against the builder's budgets for the brick's
+// triangle count and the payload's size before anything is allocated.
+//
+// Traits name the structure ("kdtree", "bsp") and give its Accel (view(),
+// triangle_test(), brick_id(), from_tree()), Tree, Node and the builder's
+// references per triangle. KdTreeBrickSerializer and BspBrickSerializer are
+// the two instances; each adds its structure key.
+//
+// Thread-safety: immutable after construction; save() and load() may run on
+// many threads at once.
+#pragma once
+
+#include <cereal/archives/binary.hpp>
+
+#include <array>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "core/accel/brick_serializer.h"
+#include "core/accel/bvh/triangle_test_kind.h"
+
+namespace outcore {
+
+template <class Traits>
+class SplitTreeSerializer : public BrickSerializer {
+ public:
+  using Accel = typename Traits::Accel;
+  using Tree = typename Traits::Tree;
+  using Node = typename Traits::Node;
+
+  SplitTreeSerializer(TriangleTest test, std::string key) : test_(test), key_(std::move(key)) {}
+
+  const std::string& structure_key() const override { return key_; }
+
+  Status save(const BrickAccel& accel, std::ostream& out) const override {
+    const std::string name = std::string(Traits::kName) + " serialiser";
+    const auto* tree_accel = dynamic_cast<const Accel*>(&accel);
+    if (tree_accel == nullptr)
+      return invalid_argument(name + ": the brick is not a " + Traits::kName + " brick");
+    if (tree_accel->triangle_test() != test_) {
+      return invalid_argument(name + ": brick " + std::to_string(tree_accel->brick_id()) +
+                              " uses triangle test " +
+                              std::string(triangle_test_name(tree_accel->triangle_test())) + ", not " +
+                              std::string(triangle_test_name(test_)));
+    }
+    const auto tree = tree_accel->view();
+    try {
+      cereal::BinaryOutputArchive archive(out);
+      archive(static_cast<uint8_t>(test_));
+      write_zeros(archive, 7);
+      archive(static_cast<uint64_t>(tree.nodes.size()), static_cast<uint64_t>(tree.refs.size()),
+              static_cast<uint64_t>(tree.triangles.size()));
+      const std::array<float, 6> bounds{tree.bounds.lo.x, tree.bounds.lo.y, tree.bounds.lo.z,
+                                        tree.bounds.hi.x, tree.bounds.hi.y, tree.bounds.hi.z};
+      archive(cereal::binary_data(bounds.data(), sizeof(bounds)));
+      write_zeros(archive, kHeaderBytes - kBoundsOffset - sizeof(bounds));
+      write_array(archive, tree.nodes);
+      write_array(archive, tree.refs);
+      write_array(archive, tree.triangles);
+      write_array(archive, tree.records);
+    } catch (const std::exception& e) {
+      return io_error(name + ": " + e.what());
+    }
+    if (!out) return io_error(name + ": write failed");
+    return Status::Ok();
+  }
+
+  Expected<std::unique_ptr<BrickAccel>> load(const SerializedBrick& payload, uint32_t brick_id,
+                                             uint32_t triangle_count) const override {
+    const std::string what = std::string(Traits::kName) + " serialiser: brick " + std::to_string(brick_id);
+    const std::span<const char> bytes = payload.bytes;
+    if (bytes.size() < kHeaderBytes) {
+      return invalid_argument(what + ": truncated (" + std::to_string(bytes.size()) + " bytes, no header)");
+    }
+    const uint8_t test = static_cast<uint8_t>(bytes[0]);
+    if (test != static_cast<uint8_t>(test_)) {
+      return invalid_argument(what + ": triangle test " + std::to_string(test) + ", expected " +
+                              std::string(triangle_test_name(test_)));
+    }
+    uint64_t counts[3];
+    std::memcpy(counts, bytes.data() + 8, sizeof(counts));
+    // The builder's budgets: a payload cannot claim more than a build of this
+    // brick could have made.
+    const uint64_t max_refs = Traits::kMaxReferencesPerTriangle * uint64_t{triangle_count} + 64;
+    const uint64_t max_nodes = 4 * max_refs + 1;
+    if (counts[2] > triangle_count) {
+      return invalid_argument(what + ": " + std::to_string(counts[2]) + " triangles, more than the brick's " +
+                              std::to_string(triangle_count));
+    }
+    if (counts[1] > max_refs || counts[0] > max_nodes) {
+      return invalid_argument(what + ": " + std::to_string(counts[0]) + " nodes and " +
+                              std::to_string(counts[1]) + " references, more than a tree of " +
+                              std::to_string(triangle_count) + " triangles holds");
+    }
+    const uint64_t refs_at = kHeaderBytes + counts[0] * sizeof(Node);
+    const uint64_t triangles_at = refs_at + counts[1] * sizeof(uint32_t);
+    const uint64_t records_at = triangles_at + counts[2] * sizeof(Triangle);
+    const uint64_t end = records_at + counts[2] * sizeof(BvhHitRecord);
+    if (end != bytes.size()) {
+      return invalid_argument(what + ": " + std::to_string(bytes.size()) + " bytes, the tree's counts need " +
+                              std::to_string(end));
+    }
+    Tree tree;
+    float bounds[6];
+    std::memcpy(bounds, bytes.data() + kBoundsOffset, sizeof(bounds));
+    tree.bounds.lo = {bounds[0], bounds[1], bounds[2]};
+    tree.bounds.hi = {bounds[3], bounds[4], bounds[5]};
+    read_array(tree.nodes, counts[0], bytes, kHeaderBytes);
+    read_array(tree.refs, counts[1], bytes, refs_at);
+    read_array(tree.triangles, counts[2], bytes, triangles_at);
+    read_array(tree.records, counts[2], bytes, records_at);
+    if (!payload.known_good) {
+      for (const float b : bounds) {
+        if (std::isnan(b)) return invalid_argument(what + ": the tree's bounds are NaN");
+      }
+      const Status valid = tree.view().validate();
+      if (!valid.ok()) return invalid_argument(what + ": " + valid.message());
+    }
+    return std::unique_ptr<BrickAccel>(Accel::from_tree(std::move(tree), test_, brick_id, triangle_count));
+  }
+
+ private:
+  static constexpr uint64_t kHeaderBytes = 64;
+  static constexpr uint64_t kBoundsOffset = 32;
+
+  template <class Archive>
+  static void write_zeros(Archive& archive, uint64_t bytes) {
+    static constexpr std::array<char, kHeaderBytes> kZeros{};
+    archive(cereal::binary_data(kZeros.data(), bytes));
+  }
+  template <class Archive, class T>
+  static void write_array(Archive& archive, std::span<const T> values) {
+    if (!values.empty()) archive(cereal::binary_data(values.data(), values.size_bytes()));
+  }
+  // An empty vector's data() may be null, which memcpy must not be given.
+  template <class T>
+  static void read_array(std::vector<T>& out, uint64_t count, std::span<const char> bytes, uint64_t offset) {
+    out.resize(count);
+    if (!out.empty()) std::memcpy(out.data(), bytes.data() + offset, out.size() * sizeof(T));
+  }
+
+  TriangleTest test_;
+  std::string key_;
+};
+
+}  // namespace outcore
