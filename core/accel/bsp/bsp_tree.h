@@ -6,23 +6,24 @@
 // references, and per triangle what a hit reports besides t, u, v. Built by
 // BspTreeBuilder (bsp_tree_builder.h), traversed by bsp_tree_traversal.h.
 //
-// BspTree owns its arrays; BspTreeView is what traversal reads. validate()
-// checks a view's structure (children after their parent and in range,
-// direction indices known, leaf runs within the references, references
-// within the triangles, depth within kMaxBspDepth) so that a view from
-// elsewhere is an error, never a crash.
+// BspTree owns its arrays; BspTreeView is what traversal reads; both are the
+// split-plane trees' shared layout (core/accel/kdtree/split_tree.h), whose
+// validate() also asks a BspNode that its direction is known and its split
+// finite.
 //
 // Thread-safety: plain values; immutable trees and views may be read from
 // many threads.
 #pragma once
 
 #include <bit>
+#include <cmath>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "core/accel/bsp/bsp_directions.h"
-#include "core/accel/bvh/bvh_tree.h"
+#include "core/accel/kdtree/split_tree.h"
 #include "core/geometry/aabb.h"
 #include "core/geometry/triangle.h"
 #include "core/util/status.h"
@@ -52,34 +53,28 @@ struct BspNode {
   uint32_t above_child() const { return bits >> 4; }
   uint32_t first() const { return word; }
   uint32_t count() const { return bits >> 4; }
+
+  // What SplitTreeView::validate() asks of a node type.
+  static constexpr const char* kTreeName = "bsp tree";
+  static constexpr uint32_t kMaxDepth = kMaxBspDepth;
+  Status check_inner(uint32_t index) const {
+    if (direction() >= kBspDirectionCount) {
+      return invalid_argument("bsp tree: node " + std::to_string(index) + " has direction " +
+                              std::to_string(direction()) + " of " + std::to_string(kBspDirectionCount));
+    }
+    if (!std::isfinite(split())) {
+      return invalid_argument("bsp tree: node " + std::to_string(index) + " splits at " +
+                              std::to_string(split()));
+    }
+    return Status::Ok();
+  }
 };
 static_assert(sizeof(BspNode) == 8);
 
 // The most children indices and reference counts a node can hold (28 bits).
 inline constexpr uint32_t kMaxBspIndex = (1u << 28) - 1;
 
-struct BspTreeView {
-  Aabb bounds;                     // of every triangle; traversal clips rays to it
-  std::span<const BspNode> nodes;  // nodes[0] is the root; empty for a tree without triangles
-  std::span<const uint32_t> refs;  // leaves' runs of triangle indices
-  std::span<const Triangle> triangles;
-  std::span<const BvhHitRecord> records;  // records[k] belongs to triangles[k]
-
-  Status validate() const;
-};
-
-struct BspTree {
-  Aabb bounds;
-  std::vector<BspNode> nodes;
-  std::vector<uint32_t> refs;
-  std::vector<Triangle> triangles;
-  std::vector<BvhHitRecord> records;
-
-  BspTreeView view() const { return {bounds, nodes, refs, triangles, records}; }
-  uint64_t memory_bytes() const {
-    return nodes.capacity() * sizeof(BspNode) + refs.capacity() * sizeof(uint32_t) +
-           triangles.capacity() * sizeof(Triangle) + records.capacity() * sizeof(BvhHitRecord);
-  }
-};
+using BspTreeView = SplitTreeView<BspNode>;
+using BspTree = SplitTree<BspNode>;
 
 }  // namespace outcore

@@ -6,11 +6,9 @@
 // Built by KdTreeBuilder (kd_tree_builder.h), traversed by
 // kd_tree_traversal.h; the tree itself knows neither.
 //
-// KdTree owns its arrays (a build); KdTreeView is what traversal reads.
-// validate() checks a view's structure (children after their parent and in
-// range, leaf runs within the references, references within the triangles,
-// depth within kMaxKdDepth) so that a view from elsewhere is an error, never
-// a crash.
+// KdTree owns its arrays (a build); KdTreeView is what traversal reads; both
+// are the split-plane trees' shared layout (split_tree.h), whose validate()
+// also asks a KdNode that its split is not NaN.
 //
 // Thread-safety: plain values; immutable trees and views may be read from
 // many threads.
@@ -18,10 +16,9 @@
 
 #include <bit>
 #include <cstdint>
-#include <span>
-#include <vector>
+#include <string>
 
-#include "core/accel/bvh/bvh_tree.h"
+#include "core/accel/kdtree/split_tree.h"
 #include "core/geometry/aabb.h"
 #include "core/geometry/triangle.h"
 #include "core/util/status.h"
@@ -52,34 +49,22 @@ struct KdNode {
   uint32_t above_child() const { return bits >> 2; }
   uint32_t first() const { return word; }
   uint32_t count() const { return bits >> 2; }
+
+  // What SplitTreeView::validate() asks of a node type.
+  static constexpr const char* kTreeName = "kd-tree";
+  static constexpr uint32_t kMaxDepth = kMaxKdDepth;
+  Status check_inner(uint32_t index) const {
+    if (split() != split())
+      return invalid_argument("kd-tree: node " + std::to_string(index) + " splits at NaN");
+    return Status::Ok();
+  }
 };
 static_assert(sizeof(KdNode) == 8);
 
 // The most children indices and reference counts a node can hold (30 bits).
 inline constexpr uint32_t kMaxKdIndex = (1u << 30) - 1;
 
-struct KdTreeView {
-  Aabb bounds;                     // of every triangle; traversal clips rays to it
-  std::span<const KdNode> nodes;   // nodes[0] is the root; empty for a tree without triangles
-  std::span<const uint32_t> refs;  // leaves' runs of triangle indices
-  std::span<const Triangle> triangles;
-  std::span<const BvhHitRecord> records;  // records[k] belongs to triangles[k]
-
-  Status validate() const;
-};
-
-struct KdTree {
-  Aabb bounds;
-  std::vector<KdNode> nodes;
-  std::vector<uint32_t> refs;
-  std::vector<Triangle> triangles;
-  std::vector<BvhHitRecord> records;
-
-  KdTreeView view() const { return {bounds, nodes, refs, triangles, records}; }
-  uint64_t memory_bytes() const {
-    return nodes.capacity() * sizeof(KdNode) + refs.capacity() * sizeof(uint32_t) +
-           triangles.capacity() * sizeof(Triangle) + records.capacity() * sizeof(BvhHitRecord);
-  }
-};
+using KdTreeView = SplitTreeView<KdNode>;
+using KdTree = SplitTree<KdNode>;
 
 }  // namespace outcore
