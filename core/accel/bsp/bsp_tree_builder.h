@@ -58,6 +58,9 @@ class BspTreeBuilder {
   };
 
   static constexpr uint64_t kMaxReferencesPerTriangle = 4;
+  // Triangles a build takes: node indices and reference counts must fit 28
+  // bits (kMaxBspIndex) under the budgets (16 nodes a triangle at most).
+  static constexpr uint64_t kMaxTriangles = uint64_t{1} << 23;
   static constexpr uint32_t kBins = 16;
   static constexpr uint32_t kExactCandidates = 24;
 

@@ -22,12 +22,15 @@
 #include "core/accel/kdtree/kd_tree_brick.h"
 #include "core/accel/kdtree/kd_tree_builder.h"
 #include "core/accel/kdtree/kd_tree_traversal.h"
+#include "core/accel/kdtree/split_tree_test_util.h"
 
 namespace outcore {
 namespace {
 
 using accel_test::bounds_of;
 using accel_test::load_brick_from;
+using split_tree_test::brute_force;
+using split_tree_test::mixed_rays;
 
 #ifdef OUTCORE_SANITIZE_BUILD
 constexpr std::size_t kRays = 400;
@@ -36,88 +39,26 @@ constexpr std::size_t kRays = 3000;
 #endif
 
 KdTree build_tree(const BrickData& brick, const KdTreeBuilder::Config& config = {}) {
-  std::vector<Triangle> triangles;
-  std::vector<TriangleId> ids;
-  for (std::size_t k = 0; k < brick.triangles.size(); ++k) {
-    if (!brick.triangles[k].is_finite() || brick.triangles[k].is_degenerate()) continue;
-    triangles.push_back(brick.triangles[k]);
-    ids.push_back(brick.ids[k]);
-  }
-  return KdTreeBuilder::build(triangles, ids, config).tree;
+  const BrickData kept = split_tree_test::usable(brick);
+  return KdTreeBuilder::build(kept.triangles, kept.ids, config).tree;
 }
 
-// Brute force with Test over the tree's own triangles.
-template <class Test>
-void brute_force(const KdTreeView& tree, const Ray& ray, Hit& best, bool& any) {
-  const typename Test::Prepared prepared = Test::prepare(ray);
-  const float tfar = ray.tfar < best.t ? ray.tfar : best.t;
-  uint32_t found = kInvalidId;
-  TriangleHit found_hit{};
-  float limit = tfar;
-  any = false;
-  if (!(limit > ray.tnear)) return;
-  for (uint32_t k = 0; k < tree.triangles.size(); ++k) {
-    TriangleHit h;
-    if (!Test::hit(prepared, tree.triangles[k], ray.tnear, ray.tfar, h)) continue;
-    any = true;
-    if (h.t > limit) continue;
-    if (!hit_is_better(h.t, tree.records[k].geometry_id, tree.records[k].primitive_id, best)) continue;
-    best.t = h.t;
-    best.geometry_id = tree.records[k].geometry_id;
-    best.primitive_id = tree.records[k].primitive_id;
-    found = k;
-    found_hit = h;
-    limit = h.t;
+// The tree's walks, for the shared helpers (split_tree_test_util.h).
+struct KdWalks {
+  template <class Test>
+  static bool closest(const KdTreeView& view, const Ray& ray, Hit& hit) {
+    return kd_closest_hit<Test>(view, ray, hit);
   }
-  if (found == kInvalidId) return;
-  best.u = found_hit.u;
-  best.v = found_hit.v;
-  best.normal = tree.records[found].normal;
-}
-
-template <class Test>
-void expect_matches_brute_force(const std::string& what, const KdTree& tree, const std::vector<Ray>& rays,
-                                std::size_t min_hits) {
-  const KdTreeView view = tree.view();
-  std::size_t hits = 0, differ = 0;
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    Hit want, got;
-    bool want_any = false;
-    brute_force<Test>(view, rays[i], want, want_any);
-    kd_closest_hit<Test>(view, rays[i], got);
-    hits += want.is_hit();
-    if (std::memcmp(&want, &got, sizeof(Hit)) != 0 && differ++ < 5) {
-      ADD_FAILURE() << what << " ray " << i << ": t " << got.t << " vs " << want.t << ", ids "
-                    << got.geometry_id << "/" << got.primitive_id << " vs " << want.geometry_id << "/"
-                    << want.primitive_id;
-    }
-    if (kd_any_hit<Test>(view, rays[i]) != want_any && differ++ < 5) {
-      ADD_FAILURE() << what << " ray " << i << ": any hit " << !want_any << " vs " << want_any;
-    }
+  template <class Test>
+  static bool any(const KdTreeView& view, const Ray& ray) {
+    return kd_any_hit<Test>(view, ray);
   }
-  EXPECT_EQ(differ, 0u) << what;
-  EXPECT_GE(hits, min_hits) << what;
-}
+};
 
-void expect_every_test_matches(const std::string& what, const KdTree& tree, const std::vector<Ray>& rays,
-                               std::size_t min_hits) {
-  ASSERT_TRUE(tree.view().validate().ok()) << what;
-  expect_matches_brute_force<WatertightTriangleTest>(what + " watertight", tree, rays, min_hits);
-  expect_matches_brute_force<MtTriangleTest>(what + " mt", tree, rays, min_hits / 2);
-  expect_matches_brute_force<DoubleTriangleTest>(what + " double", tree, rays, min_hits);
-}
-
-std::vector<Ray> mixed_rays(const BrickData& brick, std::size_t n, uint64_t seed) {
-  const Aabb b = bounds_of(brick);
-  auto rays = accel_test::rays_from_outside(b, n / 2, seed);
-  const auto inside = accel_test::rays_from_inside(b, n - n / 2, seed + 1);
-  rays.insert(rays.end(), inside.begin(), inside.end());
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    if (i % 7 == 3) rays[i].tfar = 0.3f * length(b.extent());
-    if (i % 11 == 5) rays[i].tnear = 0.05f * length(b.extent());
-    if (i % 13 == 6) rays[i].tnear = -0.5f * length(b.extent());
-  }
-  return rays;
+template <class Node>
+void expect_every_test_matches(const std::string& what, const SplitTree<Node>& tree,
+                               const std::vector<Ray>& rays, std::size_t min_hits) {
+  split_tree_test::expect_every_test_matches<KdWalks>(what, tree, rays, min_hits);
 }
 
 TEST(KdTree, MatchesBruteForceOnGeneratedScenesSoupsAndTheBunny) {

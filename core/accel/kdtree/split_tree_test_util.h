@@ -1,0 +1,114 @@
+// Test helpers shared by the split-plane trees' tests (kd_tree_test.cpp,
+// bsp/bsp_test.cpp): the float64-free brute force over a tree's own
+// triangles with a given triangle test, the bitwise comparison of a tree's
+// walks (closest and any hit) against it for every test, and the rays both
+// use. Walks names the tree's traversal: closest<Test>(view, ray, hit) and
+// any<Test>(view, ray).
+//
+// Thread-safety: test code; call from the test's thread.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "core/accel/accel_test_util.h"
+#include "core/accel/bvh/double_triangle_test.h"
+#include "core/accel/bvh/mt_triangle_test.h"
+#include "core/accel/bvh/watertight_triangle_test.h"
+#include "core/accel/kdtree/split_tree.h"
+
+namespace outcore::split_tree_test {
+
+// The brick's usable triangles (finite, not degenerate) and their ids.
+inline BrickData usable(const BrickData& brick) {
+  BrickData out;
+  for (std::size_t k = 0; k < brick.triangles.size(); ++k) {
+    if (!brick.triangles[k].is_finite() || brick.triangles[k].is_degenerate()) continue;
+    out.triangles.push_back(brick.triangles[k]);
+    out.ids.push_back(brick.ids[k]);
+  }
+  return out;
+}
+
+// Brute force with Test over the tree's own triangles.
+template <class Test, class Node>
+void brute_force(const SplitTreeView<Node>& tree, const Ray& ray, Hit& best, bool& any) {
+  const typename Test::Prepared prepared = Test::prepare(ray);
+  const float tfar = ray.tfar < best.t ? ray.tfar : best.t;
+  uint32_t found = kInvalidId;
+  TriangleHit found_hit{};
+  float limit = tfar;
+  any = false;
+  if (!(limit > ray.tnear)) return;
+  for (uint32_t k = 0; k < tree.triangles.size(); ++k) {
+    TriangleHit h;
+    if (!Test::hit(prepared, tree.triangles[k], ray.tnear, ray.tfar, h)) continue;
+    any = true;
+    if (h.t > limit) continue;
+    if (!hit_is_better(h.t, tree.records[k].geometry_id, tree.records[k].primitive_id, best)) continue;
+    best.t = h.t;
+    best.geometry_id = tree.records[k].geometry_id;
+    best.primitive_id = tree.records[k].primitive_id;
+    found = k;
+    found_hit = h;
+    limit = h.t;
+  }
+  if (found == kInvalidId) return;
+  best.u = found_hit.u;
+  best.v = found_hit.v;
+  best.normal = tree.records[found].normal;
+}
+
+template <class Test, class Walks, class Node>
+void expect_matches_brute_force(const std::string& what, const SplitTree<Node>& tree,
+                                const std::vector<Ray>& rays, std::size_t min_hits) {
+  const SplitTreeView<Node> view = tree.view();
+  std::size_t hits = 0, differ = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    Hit want, got;
+    bool want_any = false;
+    brute_force<Test>(view, rays[i], want, want_any);
+    Walks::template closest<Test>(view, rays[i], got);
+    hits += want.is_hit();
+    if (std::memcmp(&want, &got, sizeof(Hit)) != 0 && differ++ < 5) {
+      ADD_FAILURE() << what << " ray " << i << ": t " << got.t << " vs " << want.t << ", ids "
+                    << got.geometry_id << "/" << got.primitive_id << " vs " << want.geometry_id << "/"
+                    << want.primitive_id;
+    }
+    if (Walks::template any<Test>(view, rays[i]) != want_any && differ++ < 5) {
+      ADD_FAILURE() << what << " ray " << i << ": any hit " << !want_any << " vs " << want_any;
+    }
+  }
+  EXPECT_EQ(differ, 0u) << what;
+  EXPECT_GE(hits, min_hits) << what;
+}
+
+// Every triangle test, bitwise against its brute force.
+template <class Walks, class Node>
+void expect_every_test_matches(const std::string& what, const SplitTree<Node>& tree,
+                               const std::vector<Ray>& rays, std::size_t min_hits) {
+  ASSERT_TRUE(tree.view().validate().ok()) << what;
+  expect_matches_brute_force<WatertightTriangleTest, Walks>(what + " watertight", tree, rays, min_hits);
+  expect_matches_brute_force<MtTriangleTest, Walks>(what + " mt", tree, rays, min_hits / 2);
+  expect_matches_brute_force<DoubleTriangleTest, Walks>(what + " double", tree, rays, min_hits);
+}
+
+// Rays from outside and inside the brick's box, some with short, shifted or
+// negative-start segments.
+inline std::vector<Ray> mixed_rays(const BrickData& brick, std::size_t n, uint64_t seed) {
+  const Aabb b = accel_test::bounds_of(brick);
+  auto rays = accel_test::rays_from_outside(b, n / 2, seed);
+  const auto inside = accel_test::rays_from_inside(b, n - n / 2, seed + 1);
+  rays.insert(rays.end(), inside.begin(), inside.end());
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    if (i % 7 == 3) rays[i].tfar = 0.3f * length(b.extent());
+    if (i % 11 == 5) rays[i].tnear = 0.05f * length(b.extent());
+    if (i % 13 == 6) rays[i].tnear = -0.5f * length(b.extent());
+  }
+  return rays;
+}
+
+}  // namespace outcore::split_tree_test
