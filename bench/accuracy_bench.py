@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
-"""Run time against error, per brick-structure configuration (issues 5, 23).
+"""Run time against error, per brick-structure configuration (issues 5, 23, 24).
 
 For each configuration (default, embree, embree-robust, bvh-mt,
-bvh-watertight, bvh-double) and Open3D 0.20's RaycastingScene as a reference point, all in
+bvh-watertight, bvh-double, kdtree, bsp) and Open3D 0.20's RaycastingScene as a reference point, all in
 the same run, 2 threads each:
 - speed: M rays/s on N incoherent rays (bench/make_rays.py) per scene, the
   median of the warm runs of `outcore trace --repeat R` (engine time), and of
@@ -42,6 +42,8 @@ CONFIGS = {
     "bvh-mt": ["--brick-accel", "bvh", "--triangle-test", "mt"],
     "bvh-watertight": ["--brick-accel", "bvh", "--triangle-test", "watertight"],
     "bvh-double": ["--brick-accel", "bvh", "--triangle-test", "double"],
+    "kdtree": ["--brick-accel", "kdtree"],  # watertight, as the default (issue 24)
+    "bsp": ["--brick-accel", "bsp"],
 }
 SPEED_SCENES = {
     "bunny": [os.path.join(MODELS, "stanford-bunny.obj")],
