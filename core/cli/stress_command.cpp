@@ -1,6 +1,7 @@
 // `outcore stress`: the numerical stress suite as a report (one table, a row
 // per case and configuration; core/stress). Exit code 0 unless a
-// configuration that must not leak (bvh-watertight, bvh-double) leaked or
+// configuration that must not leak (bvh-watertight, bvh-double, the kd-tree's
+// and the BSP's) leaked or
 // answered differently across brick seams, or the suite could not run.
 #include <CLI/CLI.hpp>
 
@@ -119,7 +120,8 @@ void add_stress_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<StressArgs>();
   CLI::App* cmd = app.add_subcommand("stress", "Numerical stress suite: leaks and errors per configuration");
   cmd->add_option("--config", args->config,
-                  "all, embree, embree-robust, bvh-mt, bvh-watertight or bvh-double")
+                  "all, embree, embree-robust, bvh-mt, bvh-watertight, bvh-double, kdtree-watertight, "
+                  "kdtree-double, bsp-watertight or bsp-double")
       ->capture_default_str();
   cmd->add_flag("--quick", args->quick, "Smaller generated meshes and fewer reference checks");
   auto* models =

@@ -45,6 +45,10 @@ const std::vector<StressConfig>& stress_configs() {
       {"bvh-mt", "bvh", {{"triangle_test", "mt"}}, false},
       {"bvh-watertight", "bvh", {{"triangle_test", "watertight"}}, true},
       {"bvh-double", "bvh", {{"triangle_test", "double"}}, true},
+      {"kdtree-watertight", "kdtree", {{"triangle_test", "watertight"}}, true},
+      {"kdtree-double", "kdtree", {{"triangle_test", "double"}}, true},
+      {"bsp-watertight", "bsp", {{"triangle_test", "watertight"}}, true},
+      {"bsp-double", "bsp", {{"triangle_test", "double"}}, true},
   };
   return kConfigs;
 }

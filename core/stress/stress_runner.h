@@ -11,8 +11,11 @@
 // computed once per scene for up to max_checked rays (evenly spaced) and
 // shared by every configuration.
 //
-// Configurations: embree, embree-robust, bvh-mt, bvh-watertight, bvh-double
-// (the last two must never leak: StressConfig::must_not_leak).
+// Configurations: embree, embree-robust, bvh-mt, bvh-watertight, bvh-double,
+// and the split-plane trees with the exact tests: kdtree-watertight,
+// kdtree-double, bsp-watertight, bsp-double
+// (bvh-watertight, bvh-double and the tree ones must never leak:
+// StressConfig::must_not_leak).
 //
 // Thread-safety: plain functions; run_stress uses the engine's threads for
 // seam scenes.

@@ -129,6 +129,17 @@ TEST(StressSuite, BvhDoubleNeverLeaksAndAgreesWithTheReference) {
   expect_watertight("bvh-double", true);
 }
 
+// The split-plane trees (issue 24) are held to the bvh's bar on every scene.
+TEST(StressSuite, KdTreeAndBspWatertightNeverLeak) {
+  expect_watertight("kdtree-watertight", false);
+  expect_watertight("bsp-watertight", false);
+}
+
+TEST(StressSuite, KdTreeAndBspDoubleNeverLeakAndAgreeWithTheReference) {
+  expect_watertight("kdtree-double", true);
+  expect_watertight("bsp-double", true);
+}
+
 // The suite is not vacuous: Möller–Trumbore in float leaks through shared
 // vertices and edges somewhere in it.
 TEST(StressSuite, MollerTrumboreLeaksSomewhere) {
@@ -143,7 +154,7 @@ TEST(StressSuite, MollerTrumboreLeaksSomewhere) {
 }
 
 TEST(StressSuite, ConfigSelectionRejectsUnknownNames) {
-  EXPECT_EQ(select_stress_configs("all")->size(), 5u);
+  EXPECT_EQ(select_stress_configs("all")->size(), 9u);
   EXPECT_EQ(select_stress_configs("bvh-mt")->front().name, "bvh-mt");
   const auto bad = select_stress_configs("bvh");
   ASSERT_FALSE(bad.ok());

@@ -10,7 +10,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -149,6 +152,11 @@ TEST(KdTree, RaysInAndThroughSplitPlanesLoseNothing) {
 // C in that order with the cells' parts of the segment. Triangle 0, in B and
 // C, is hit at t = 3 (in C's part): when B finds it, the walk must go on to
 // C, where triangle 1 is hit nearer, at t = 2.8.
+struct PendingPartCopy {
+  uint32_t node;
+  float tmin, tmax;
+};
+
 TEST(KdTree, TheWalkVisitsCellsInOrderAndASpanningTriangleDoesNotEndItEarly) {
   // A triangle in the plane x = c around y = c - 0.5, where the ray meets
   // it at t = c + 2; wall(1) reaches below y = 0 (into B).
@@ -186,6 +194,70 @@ TEST(KdTree, TheWalkVisitsCellsInOrderAndASpanningTriangleDoesNotEndItEarly) {
   ASSERT_TRUE(kd_closest_hit<WatertightTriangleTest>(tree.view(), ray, hit));
   EXPECT_EQ(hit.primitive_id, 1u);
   EXPECT_NEAR(hit.t, 2.8f, 1e-5f);
+
+  // The same walk step by step, as the classic worked example: every node
+  // entered, its part of the segment and the stack at that moment. The ray
+  // meets x = 0 at t = 2 and y = 0 at t = 2.5; the bounds end at t = 6.
+  struct Step {
+    uint32_t node;
+    float t0, t1;
+    std::vector<PendingPartCopy> stack;
+  };
+  struct Recorder {
+    std::vector<Step>* steps;
+    void enter(uint32_t node, float t0, float t1, std::span<const kd_detail::PendingPart> stack) const {
+      std::vector<PendingPartCopy> copy;
+      for (const auto& p : stack) copy.push_back({p.node, p.tmin, p.tmax});
+      steps->push_back({node, t0, t1, copy});
+    }
+  };
+  std::vector<Step> steps;
+  float best = ray.tfar;
+  std::vector<uint32_t> leaves_hit;
+  kd_detail::traverse(
+      tree.view(), ray, 0.0f, best,
+      [&](uint32_t first, uint32_t count, float& limit) {
+        // The closest-hit leaf rule by hand: the nearest hit in the leaf
+        // lowers the limit, and later parts beyond it are dropped.
+        for (uint32_t k = first; k < first + count; ++k) {
+          const float x = tree.triangles[tree.refs[k]].v0.x;
+          limit = std::min(limit, x + 2.0f);  // the wall at x is met at t = x + 2
+          leaves_hit.push_back(tree.refs[k]);
+        }
+        return false;
+      },
+      Recorder{&steps});
+  ASSERT_EQ(steps.size(), 5u);
+  const auto near = [](float a, float b) { return std::fabs(a - b) < 1e-4f; };
+  // 1. The root with the whole segment and an empty stack; the plane x = 0
+  //    is crossed inside it: the far child (2) waits with [2, 6].
+  EXPECT_EQ(steps[0].node, 0u);
+  EXPECT_TRUE(near(steps[0].t0, 0.0f) && near(steps[0].t1, 6.0f)) << steps[0].t0 << " " << steps[0].t1;
+  EXPECT_TRUE(steps[0].stack.empty());
+  // 2. Leaf A with [0, 2]; the stack holds node 2 with [2, 6].
+  EXPECT_EQ(steps[1].node, 1u);
+  EXPECT_TRUE(near(steps[1].t1, 2.0f));
+  ASSERT_EQ(steps[1].stack.size(), 1u);
+  EXPECT_EQ(steps[1].stack[0].node, 2u);
+  EXPECT_TRUE(near(steps[1].stack[0].tmin, 2.0f) && near(steps[1].stack[0].tmax, 6.0f));
+  // 3. A had nothing: node 2 is popped with [2, 6]; the stack is empty.
+  EXPECT_EQ(steps[2].node, 2u);
+  EXPECT_TRUE(near(steps[2].t0, 2.0f) && near(steps[2].t1, 6.0f));
+  EXPECT_TRUE(steps[2].stack.empty());
+  // 4. Leaf B with [2, 2.5]; leaf C waits with [2.5, 6]. B's triangle is hit
+  //    at t = 3, beyond B's part: the walk must go on.
+  EXPECT_EQ(steps[3].node, 3u);
+  EXPECT_TRUE(near(steps[3].t0, 2.0f) && near(steps[3].t1, 2.5f));
+  ASSERT_EQ(steps[3].stack.size(), 1u);
+  EXPECT_EQ(steps[3].stack[0].node, 4u);
+  EXPECT_TRUE(near(steps[3].stack[0].tmin, 2.5f));
+  // 5. C (its part starts at 2.5 <= 3) with [2.5, 6] and an empty stack,
+  //    where the nearer wall (t = 2.8) is found; then the stack is empty.
+  EXPECT_EQ(steps[4].node, 4u);
+  EXPECT_TRUE(near(steps[4].t0, 2.5f) && near(steps[4].t1, 6.0f));
+  EXPECT_TRUE(steps[4].stack.empty());
+  EXPECT_EQ(leaves_hit, (std::vector<uint32_t>{0, 0, 1}));
+  EXPECT_TRUE(near(best, 2.8f));
 }
 
 TEST(KdTree, TheBuildReferencesEveryTriangleAndKeepsItsBudgets) {

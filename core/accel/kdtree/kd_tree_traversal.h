@@ -29,6 +29,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <span>
 
 #include "core/accel/bvh/bvh_traversal.h"
 #include "core/accel/kdtree/kd_tree.h"
@@ -84,17 +85,29 @@ struct AxisPlanes {
 // [t0, t1] may touch, front to back; leaf returns true to stop the walk (any
 // hit). `limit` is the best hit so far (leaf lowers it). kMaxDepth bounds the
 // tree's depth (one push per level: the stack cannot overflow).
-template <uint32_t kMaxDepth, class Node, class Planes, class Leaf>
-inline void walk(const Node* nodes, const Planes& planes, float t0, float t1, float& limit, Leaf&& leaf) {
-  struct Pending {
-    uint32_t node;
-    float tmin, tmax;
-  };
+// A part of the segment waiting on the stack: a node and its [tmin, tmax].
+struct PendingPart {
+  uint32_t node;
+  float tmin, tmax;
+};
+
+// What the walk tells an observer at every node it enters (tests: the order
+// of nodes, their parts of the segment and the stack); the default observes
+// nothing and costs nothing.
+struct NoWalkObserver {
+  void enter(uint32_t /*node*/, float /*t0*/, float /*t1*/, std::span<const PendingPart> /*stack*/) const {}
+};
+
+template <uint32_t kMaxDepth, class Node, class Planes, class Leaf, class Observer = NoWalkObserver>
+inline void walk(const Node* nodes, const Planes& planes, float t0, float t1, float& limit, Leaf&& leaf,
+                 const Observer& observer = {}) {
+  using Pending = PendingPart;
   std::array<Pending, kMaxDepth> stack;
   uint32_t top = 0;
   uint32_t index = 0;
   while (true) {
     if (t0 <= limit) {
+      observer.enter(index, t0, t1, std::span<const Pending>(stack.data(), top));
       const Node& node = nodes[index];
       if (!node.is_leaf()) {
         const uint32_t below = index + 1, above = node.above_child();
@@ -166,14 +179,15 @@ inline bool clip_to_bounds(const Aabb& bounds, const Ray& ray, const bvh_detail:
 // Calls leaf(first, count, limit) for the leaves the segment [tmin, limit]
 // may touch, front to back; leaf returns true to stop the walk (any hit).
 // `limit` is the best hit so far (leaf lowers it).
-template <class Leaf>
-inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& limit, Leaf&& leaf) {
+template <class Leaf, class Observer = NoWalkObserver>
+inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& limit, Leaf&& leaf,
+                     const Observer& observer = {}) {
   if (tree.nodes.empty()) return;
   const bvh_detail::BoxRay box_ray(ray);
   float segment_min, segment_max;
   if (!clip_to_bounds(tree.bounds, ray, box_ray, tmin, limit, segment_min, segment_max)) return;
   const AxisPlanes planes{ray, box_ray.inverse_direction};
-  walk<kMaxKdDepth>(tree.nodes.data(), planes, segment_min, segment_max, limit, leaf);
+  walk<kMaxKdDepth>(tree.nodes.data(), planes, segment_min, segment_max, limit, leaf, observer);
 }
 
 // Closest and any hit over the leaves a tree's traversal visits, shared by
