@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "core/geometry/aabb.h"
-#include "core/geometry/bounding_sphere.h"
-#include "core/geometry/oriented_box.h"
+#include "core/upper/bounding_sphere.h"
+#include "core/upper/oriented_box.h"
 #include "core/upper/upper_hierarchy.h"
 #include "core/util/status.h"
 

@@ -2,7 +2,7 @@
 // by `trace/serve --brick-bounds aabb|sphere|obb`. The upper hierarchy's leaf
 // boxes (AABBs) are always tested (they sit in its wide nodes and cost
 // nothing extra); sphere and obb add the brick's stored bounding sphere or
-// oriented box (core/geometry/bounding_sphere.h, oriented_box.h, fitted at
+// oriented box (core/upper/bounding_sphere.h, oriented_box.h, fitted at
 // pack time) as a second, tighter test. Both are conservative for the brick
 // structure's triangle test (its hit rounding scale), so the choice never
 // changes an answer, only how many brick visits find nothing
@@ -18,9 +18,9 @@
 #include <string_view>
 #include <vector>
 
-#include "core/geometry/bounding_sphere.h"
-#include "core/geometry/oriented_box.h"
 #include "core/ray/ray_types.h"
+#include "core/upper/bounding_sphere.h"
+#include "core/upper/oriented_box.h"
 
 namespace outcore {
 

@@ -1,11 +1,11 @@
-#include "core/geometry/oriented_box.h"
+#include "core/upper/oriented_box.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
 
-#include "core/geometry/bound_segment.h"
+#include "core/upper/bound_segment.h"
 
 namespace outcore {
 namespace {

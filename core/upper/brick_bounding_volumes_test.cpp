@@ -16,9 +16,9 @@
 #include "core/accel/accel_test_util.h"
 #include "core/accel/bvh/mt_triangle_test.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
-#include "core/geometry/bounding_sphere.h"
 #include "core/geometry/hit_rounding.h"
-#include "core/geometry/oriented_box.h"
+#include "core/upper/bounding_sphere.h"
+#include "core/upper/oriented_box.h"
 
 namespace outcore {
 namespace {

@@ -1,10 +1,10 @@
-#include "core/geometry/bounding_sphere.h"
+#include "core/upper/bounding_sphere.h"
 
 #include <cmath>
 #include <limits>
 #include <numbers>
 
-#include "core/geometry/bound_segment.h"
+#include "core/upper/bound_segment.h"
 
 namespace outcore {
 namespace {
