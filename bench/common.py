@@ -1,6 +1,7 @@
 """What the benchmark drivers share: paths, running a command, packing a
 scene into a work directory once, reading a store's triangles back, and
 timing Open3D's cast_rays."""
+import json
 import os
 import statistics
 import subprocess
@@ -34,6 +35,21 @@ def prepare_store(outcore, work, name, inputs, extra=()):
     with open(info, "w") as f:
         f.write(run([outcore, "info", store, "--json"]))
     return store, info
+
+
+def trace_repeated(outcore, store, rays_path, out, runs, cache_mb, extra=()):
+    """`outcore trace --repeat runs` (2 threads) with a budget meant to hold the
+    scene: the stats of every run (run 1 cold, the rest warm); exits if a warm
+    run built a brick (the budget was too small)."""
+    stats_path = out + ".stats.json"
+    run([outcore, "trace", store, "--rays", rays_path, "-o", out, "--threads", "2", "--repeat", str(runs),
+         "--cache-mb", str(cache_mb), "--stats-json", stats_path, *extra])
+    with open(stats_path) as f:
+        stats = json.load(f)
+    stats = stats if isinstance(stats, list) else [stats]
+    if any(s["brick_builds"] > 0 for s in stats[1:]):
+        sys.exit(f"a warm run of {rays_path} built bricks: raise --cache-mb (now {cache_mb})")
+    return stats
 
 
 def make_rays(info, kind, count, path):

@@ -30,7 +30,7 @@ import statistics
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from common import OUTCORE, ROOT, make_rays, prepare_store, run  # noqa: E402
+from common import OUTCORE, ROOT, make_rays, prepare_store, trace_repeated  # noqa: E402
 
 SCENES = {
     "bunny": [os.path.join(ROOT, "tests", "data", "models", "stanford-bunny.obj")],
@@ -44,16 +44,8 @@ PACK_OPTIONS = {"tilted": ("--brick-tris", "4096")}
 
 
 def trace(store, rays_path, runs, extra):
-    """(cold stats, warm median seconds, warm stats) of `outcore trace --repeat runs`."""
-    out = rays_path + ".hits.npy"
-    stats_path = rays_path + ".stats.json"
-    run([OUTCORE, "trace", store, "--rays", rays_path, "-o", out, "--threads", "2", "--repeat", str(runs),
-         "--cache-mb", str(CACHE_MB), "--stats-json", stats_path] + extra)
-    with open(stats_path) as f:
-        stats = json.load(f)
-    stats = stats if isinstance(stats, list) else [stats]
-    if any(s["brick_builds"] > 0 for s in stats[1:]):
-        sys.exit(f"a warm run built bricks: raise --cache-mb (now {CACHE_MB})")
+    """(cold stats, warm median seconds, last warm stats) of `outcore trace --repeat runs`."""
+    stats = trace_repeated(OUTCORE, store, rays_path, rays_path + ".hits.npy", runs, CACHE_MB, extra)
     return stats[0], statistics.median(s["seconds"]["total"] for s in stats[1:]), stats[-1]
 
 

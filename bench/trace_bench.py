@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from common import (OUTCORE, ROOT, make_rays, open3d_scene, open3d_timed_cast,  # noqa: E402,F401
-                    prepare_store, read_store_triangles, run)
+                    prepare_store, read_store_triangles, run, trace_repeated)
 from sparse_scene import write_sparse_scene  # noqa: E402
 
 SCENES = {
@@ -46,14 +46,7 @@ def open3d_cast(tris, rays, runs):
 
 
 def outcore_trace(store, rays_path, out, runs, extra):
-    stats_path = out + ".stats.json"
-    run([OUTCORE, "trace", store, "--rays", rays_path, "-o", out, "--threads", "2", "--repeat", str(runs),
-         "--cache-mb", str(CACHE_MB), "--stats-json", stats_path] + extra)
-    with open(stats_path) as f:
-        stats = json.load(f)
-    stats = stats if isinstance(stats, list) else [stats]
-    if any(s["brick_builds"] > 0 for s in stats[1:]):
-        sys.exit(f"a warm run of {rays_path} built bricks: raise --cache-mb (now {CACHE_MB})")
+    stats = trace_repeated(OUTCORE, store, rays_path, out, runs, CACHE_MB, extra)
     return stats[0]["seconds"]["total"], statistics.median(s["seconds"]["total"] for s in stats[1:]), stats
 
 

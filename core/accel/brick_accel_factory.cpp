@@ -1,6 +1,5 @@
 #include "core/accel/brick_accel_factory.h"
 
-#include <charconv>
 #include <cmath>
 #include <string>
 
@@ -9,6 +8,7 @@
 #include "core/accel/embree_brick.h"
 #include "core/accel/kdtree/kd_tree_brick.h"
 #include "core/accel/reference_brick.h"
+#include "core/util/parse_number.h"
 
 namespace outcore {
 namespace {
@@ -50,14 +50,6 @@ Expected<std::unique_ptr<BrickBuilder>> make_embree_builder(const BrickAccelOpti
     }
   }
   return std::unique_ptr<BrickBuilder>(new EmbreeBrickBuilder(config));
-}
-
-// The whole value as a number, or nothing ("8x", "", " 8" are errors).
-template <class T>
-bool parse_number(const std::string& text, T& out) {
-  const char* end = text.data() + text.size();
-  const auto [ptr, ec] = std::from_chars(text.data(), end, out);
-  return ec == std::errc() && ptr == end && !text.empty();
 }
 
 // Default triangle_test=watertight: it is the configuration with zero leaks
@@ -107,34 +99,30 @@ Expected<std::unique_ptr<BrickBuilder>> make_bvh_builder(const BrickAccelOptions
   return std::unique_ptr<BrickBuilder>(new BvhBrickBuilder(config));
 }
 
-// Defaults: watertight (as the bvh) and KdTreeBuilder::Config's constants.
+// The options both split-plane trees take: triangle_test and the SAH
+// constants (SplitTreeCosts); false when `key` is none of them.
+template <class Config>
+Expected<bool> parse_split_tree_option(std::string_view structure, const std::string& key,
+                                       const std::string& value, Config& config) {
+  if (key == "triangle_test") {
+    OUTCORE_RETURN_IF_ERROR(parse_triangle_test(std::string(structure), value, config.triangle_test));
+    return true;
+  }
+  return config.builder.parse_option(structure, key, value);
+}
+
+// Defaults: watertight (as the bvh) and SplitTreeCosts' constants.
 Expected<std::unique_ptr<BrickBuilder>> make_kdtree_builder(const BrickAccelOptions& options) {
   KdTreeBrickConfig config;
-  KdTreeBuilder::Config& b = config.builder;
   for (const auto& [key, value] : options) {
-    if (key == "triangle_test") {
-      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("kdtree", value, config.triangle_test));
-    } else if (key == "max_depth") {
-      if (!parse_number(value, b.max_depth)) {
-        return invalid_argument("brick accel kdtree: option max_depth must be a whole number, got '" + value +
-                                "'");
-      }
-    } else if (key == "traversal_cost" || key == "intersection_cost" || key == "empty_bonus") {
-      float number = 0;
-      if (!parse_number(value, number) || !std::isfinite(number)) {
-        return invalid_argument("brick accel kdtree: option " + key + " must be a number, got '" + value +
-                                "'");
-      }
-      (key == "traversal_cost"      ? b.traversal_cost
-       : key == "intersection_cost" ? b.intersection_cost
-                                    : b.empty_bonus) = number;
-    } else {
+    OUTCORE_ASSIGN_OR_RETURN(const bool known, parse_split_tree_option("kdtree", key, value, config));
+    if (!known) {
       return invalid_argument("brick accel kdtree: unknown option '" + key +
                               "' (known: triangle_test, traversal_cost, intersection_cost, empty_bonus, "
                               "max_depth)");
     }
   }
-  const Status valid = b.validate();
+  const Status valid = config.builder.validate();
   if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
   return std::unique_ptr<BrickBuilder>(new KdTreeBrickBuilder(config));
 }
@@ -143,30 +131,20 @@ Expected<std::unique_ptr<BrickBuilder>> make_kdtree_builder(const BrickAccelOpti
 // all 13 directions).
 Expected<std::unique_ptr<BrickBuilder>> make_bsp_builder(const BrickAccelOptions& options) {
   BspBrickConfig config;
-  BspTreeBuilder::Config& b = config.builder;
   for (const auto& [key, value] : options) {
-    if (key == "triangle_test") {
-      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("bsp", value, config.triangle_test));
-    } else if (key == "max_depth" || key == "directions") {
-      if (!parse_number(value, key == "max_depth" ? b.max_depth : b.directions)) {
-        return invalid_argument("brick accel bsp: option " + key + " must be a whole number, got '" + value +
-                                "'");
-      }
-    } else if (key == "traversal_cost" || key == "intersection_cost" || key == "empty_bonus") {
-      float number = 0;
-      if (!parse_number(value, number) || !std::isfinite(number)) {
-        return invalid_argument("brick accel bsp: option " + key + " must be a number, got '" + value + "'");
-      }
-      (key == "traversal_cost"      ? b.traversal_cost
-       : key == "intersection_cost" ? b.intersection_cost
-                                    : b.empty_bonus) = number;
-    } else {
+    OUTCORE_ASSIGN_OR_RETURN(const bool known, parse_split_tree_option("bsp", key, value, config));
+    if (known) continue;
+    if (key != "directions") {
       return invalid_argument("brick accel bsp: unknown option '" + key +
                               "' (known: triangle_test, traversal_cost, intersection_cost, empty_bonus, "
                               "max_depth, directions)");
     }
+    if (!parse_number(value, config.builder.directions)) {
+      return invalid_argument("brick accel bsp: option directions must be a whole number, got '" + value +
+                              "'");
+    }
   }
-  const Status valid = b.validate();
+  const Status valid = config.builder.validate();
   if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
   return std::unique_ptr<BrickBuilder>(new BspBrickBuilder(config));
 }

@@ -77,11 +77,13 @@ class ProxyGate {
   bool bound_may_hit(uint32_t brick, const Ray& ray, float tmax) const {
     return bounds_ == nullptr || bounds_->may_hit(brick, ray, ray.tnear, tmax);
   }
-  // The gate: the bound, then the proxy unless none is wanted. A rejection by
-  // the proxy is the caller's to count (as skipped).
+  // The gate: the bound, then the proxy unless none is wanted; counts a
+  // rejection by either (skipped_by_bound, skipped).
   bool admits(uint32_t brick, const Ray& ray, float tmax, VisitCounters& counters) const {
     if (!bound_admits(brick, ray, tmax, counters)) return false;
-    return needs_no_test(brick) || may_hit(brick, ray, tmax, counters);
+    if (needs_no_test(brick) || may_hit(brick, ray, tmax, counters)) return true;
+    ++counters.skipped;
+    return false;
   }
 
  private:

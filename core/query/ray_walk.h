@@ -124,9 +124,7 @@ struct RayWalk {
     const BrickKey& key = p.window[0];
     p.last = key;
     p.next = 1;
-    const uint64_t skipped_before = counters.skipped_by_bound;
     if (gate.admits(key.brick, batch.rays[i], batch.horizon(i), counters)) return key.brick;
-    counters.skipped += counters.skipped_by_bound == skipped_before;
     if (demand.tracking()) demand.sub(key.brick);
     return advance(p, i, counters);
   }
@@ -166,9 +164,7 @@ struct RayWalk {
         take_ahead(ahead, i, limit, counters);
         continue;
       }
-      const uint64_t skipped_before = counters.skipped_by_bound;
       if (gate.admits(key.brick, batch.rays[i], limit, counters)) return key.brick;
-      counters.skipped += counters.skipped_by_bound == skipped_before;
       // Passed over: the ray no longer needs the brick.
       if (demand.tracking()) demand.sub(key.brick);
     }

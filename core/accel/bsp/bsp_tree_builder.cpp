@@ -372,21 +372,7 @@ class Build {
 }  // namespace
 
 Status BspTreeBuilder::Config::validate() const {
-  if (!(traversal_cost > 0.0f) || !std::isfinite(traversal_cost)) {
-    return invalid_argument("bsp: traversal_cost must be a positive number, got " +
-                            std::to_string(traversal_cost));
-  }
-  if (!(intersection_cost > 0.0f) || !std::isfinite(intersection_cost)) {
-    return invalid_argument("bsp: intersection_cost must be a positive number, got " +
-                            std::to_string(intersection_cost));
-  }
-  if (!(empty_bonus >= 0.0f && empty_bonus < 1.0f)) {
-    return invalid_argument("bsp: empty_bonus must be in [0, 1), got " + std::to_string(empty_bonus));
-  }
-  if (max_depth > kMaxBspDepth) {
-    return invalid_argument("bsp: max_depth must be at most " + std::to_string(kMaxBspDepth) + ", got " +
-                            std::to_string(max_depth));
-  }
+  OUTCORE_RETURN_IF_ERROR(SplitTreeCosts::validate("bsp", kMaxBspDepth));
   if (directions != 3 && directions != 7 && directions != 13) {
     return invalid_argument("bsp: directions must be 3, 7 or 13, got " + std::to_string(directions));
   }
@@ -394,9 +380,7 @@ Status BspTreeBuilder::Config::validate() const {
 }
 
 uint32_t BspTreeBuilder::depth_limit(const Config& config, uint64_t n) {
-  if (config.max_depth != 0) return config.max_depth;
-  const double automatic = 8.0 + 1.3 * std::log2(static_cast<double>(std::max<uint64_t>(n, 1)));
-  return std::min<uint32_t>(kMaxBspDepth, static_cast<uint32_t>(std::lround(automatic)));
+  return config.depth_limit(n, kMaxBspDepth);
 }
 
 uint64_t BspTreeBuilder::tree_bytes_bound(uint64_t n) {

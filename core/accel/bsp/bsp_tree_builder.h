@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "core/accel/bsp/bsp_tree.h"
+#include "core/accel/kdtree/split_tree_costs.h"
 #include "core/geometry/triangle.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
@@ -43,13 +44,8 @@ namespace outcore {
 
 class BspTreeBuilder {
  public:
-  struct Config {
-    // The kd-tree's (pbrt-v3's) constants.
-    float traversal_cost = 1.0f;
-    float intersection_cost = 80.0f;
-    float empty_bonus = 0.5f;
-    // 0: 8 + 1.3 log2(N), at most kMaxBspDepth.
-    uint32_t max_depth = 0;
+  // The kd-tree's (pbrt-v3's) constants and depth limit, and the directions.
+  struct Config : SplitTreeCosts {
     // 3 (the kd-tree's axes), 7 (and the cube diagonals) or 13 (and the face
     // diagonals).
     uint32_t directions = 13;

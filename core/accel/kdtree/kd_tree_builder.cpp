@@ -358,29 +358,8 @@ class Build {
 
 }  // namespace
 
-Status KdTreeBuilder::Config::validate() const {
-  if (!(traversal_cost > 0.0f) || !std::isfinite(traversal_cost)) {
-    return invalid_argument("kdtree: traversal_cost must be a positive number, got " +
-                            std::to_string(traversal_cost));
-  }
-  if (!(intersection_cost > 0.0f) || !std::isfinite(intersection_cost)) {
-    return invalid_argument("kdtree: intersection_cost must be a positive number, got " +
-                            std::to_string(intersection_cost));
-  }
-  if (!(empty_bonus >= 0.0f && empty_bonus < 1.0f)) {
-    return invalid_argument("kdtree: empty_bonus must be in [0, 1), got " + std::to_string(empty_bonus));
-  }
-  if (max_depth > kMaxKdDepth) {
-    return invalid_argument("kdtree: max_depth must be at most " + std::to_string(kMaxKdDepth) + ", got " +
-                            std::to_string(max_depth));
-  }
-  return Status::Ok();
-}
-
 uint32_t KdTreeBuilder::depth_limit(const Config& config, uint64_t n) {
-  if (config.max_depth != 0) return config.max_depth;
-  const double automatic = 8.0 + 1.3 * std::log2(static_cast<double>(std::max<uint64_t>(n, 1)));
-  return std::min<uint32_t>(kMaxKdDepth, static_cast<uint32_t>(std::lround(automatic)));
+  return config.depth_limit(n, kMaxKdDepth);
 }
 
 uint64_t KdTreeBuilder::tree_bytes_bound(uint64_t n) {

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "core/accel/kdtree/kd_tree.h"
+#include "core/accel/kdtree/split_tree_costs.h"
 #include "core/geometry/triangle.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
@@ -34,15 +35,8 @@ namespace outcore {
 
 class KdTreeBuilder {
  public:
-  struct Config {
-    // pbrt-v3's constants (traversal 1, intersection 80, empty bonus 0.5).
-    float traversal_cost = 1.0f;
-    float intersection_cost = 80.0f;
-    float empty_bonus = 0.5f;
-    // 0: 8 + 1.3 log2(N) (pbrt-v3), at most kMaxKdDepth.
-    uint32_t max_depth = 0;
-
-    Status validate() const;
+  struct Config : SplitTreeCosts {
+    Status validate() const { return SplitTreeCosts::validate("kdtree", kMaxKdDepth); }
   };
 
   static constexpr uint64_t kMaxReferencesPerTriangle = 4;
