@@ -42,14 +42,15 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   if (!bound_kind) {
     return invalid_argument("unknown brick bound '" + options.brick_bounds + "' (known: aabb, sphere, obb)");
   }
+  // Only the chosen bound's records are kept (none for aabb).
   std::vector<BoundingSphere> spheres;
   std::vector<OrientedBox> boxes;
   for (const BrickRecord& brick : store->manifest().bricks) {
-    spheres.push_back(brick.sphere);
-    boxes.push_back(brick.obb);
+    if (*bound_kind == BrickBoundKind::kSphere) spheres.push_back(brick.sphere);
+    if (*bound_kind == BrickBoundKind::kObb) boxes.push_back(brick.obb);
   }
   auto bounds = std::make_unique<const BrickBounds>(*bound_kind, std::move(spheres), std::move(boxes),
-                                                       builder->hit_rounding_scale());
+                                                    builder->hit_rounding_scale());
   // Before the proxies (which may build and write proxies.bin): a budget no
   // brick-by-brick schedule can work under is the user's error, found now.
   OUTCORE_RETURN_IF_ERROR(check_cache_budget(store->manifest(), *builder, options.cache_bytes));

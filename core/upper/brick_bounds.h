@@ -33,7 +33,8 @@ std::string_view brick_bound_name(BrickBoundKind kind);
 
 class BrickBounds {
  public:
-  // spheres[b] and boxes[b] belong to brick b (the manifest's records).
+  // spheres[b] (sphere) or boxes[b] (obb) belongs to brick b (the
+  // manifest's records); the other vector may be empty.
   BrickBounds(BrickBoundKind kind, std::vector<BoundingSphere> spheres, std::vector<OrientedBox> boxes,
               double rounding_scale)
       : kind_(kind),
