@@ -6,6 +6,7 @@
 #include "core/accel/bsp/bsp_brick.h"
 #include "core/accel/bvh/bvh_brick.h"
 #include "core/accel/embree_brick.h"
+#include "core/accel/grid/grid_brick.h"
 #include "core/accel/kdtree/kd_tree_brick.h"
 #include "core/accel/reference_brick.h"
 #include "core/util/parse_number.h"
@@ -149,6 +150,26 @@ Expected<std::unique_ptr<BrickBuilder>> make_bsp_builder(const BrickAccelOptions
   return std::unique_ptr<BrickBuilder>(new BspBrickBuilder(config));
 }
 
+// Defaults: watertight and UniformGridBuilder::Config's (the density rule,
+// cells_per_triangle chosen by measurement: docs/BENCHMARKS.md).
+Expected<std::unique_ptr<BrickBuilder>> make_grid_builder(const BrickAccelOptions& options) {
+  GridBrickConfig config;
+  for (const auto& [key, value] : options) {
+    if (key == "triangle_test") {
+      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("grid", value, config.triangle_test));
+      continue;
+    }
+    OUTCORE_ASSIGN_OR_RETURN(const bool known, config.builder.parse_option("grid", key, value));
+    if (!known) {
+      return invalid_argument("brick accel grid: unknown option '" + key +
+                              "' (known: triangle_test, resolution, cells_per_triangle, max_resolution)");
+    }
+  }
+  const Status valid = config.builder.validate();
+  if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
+  return std::unique_ptr<BrickBuilder>(new GridBrickBuilder(config));
+}
+
 Expected<std::unique_ptr<BrickBuilder>> make_reference_builder(const BrickAccelOptions& options) {
   if (!options.empty()) {
     return invalid_argument("brick accel reference: unknown option '" + options.begin()->first +
@@ -164,9 +185,8 @@ struct BrickStructureEntry {
   Expected<std::unique_ptr<BrickBuilder>> (*make)(const BrickAccelOptions& options);
 };
 constexpr BrickStructureEntry kBrickStructures[] = {
-    {"embree", make_embree_builder},       {"bvh", make_bvh_builder},
-    {"kdtree", make_kdtree_builder},       {"bsp", make_bsp_builder},
-    {"reference", make_reference_builder},
+    {"embree", make_embree_builder}, {"bvh", make_bvh_builder},   {"kdtree", make_kdtree_builder},
+    {"bsp", make_bsp_builder},       {"grid", make_grid_builder}, {"reference", make_reference_builder},
 };
 
 }  // namespace

@@ -1,4 +1,4 @@
-// Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "reference") with options
+// Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "grid", "reference") with options
 // given as key=value strings; unknown names and unknown or malformed options
 // are errors, never ignored. The returned BrickBuilder turns a loaded brick into
 // a BrickAccel.
@@ -63,7 +63,9 @@ inline constexpr const char* kDefaultBrickAccel = "bvh";
 // max_leaf_size, traversal_cost, intersection_cost: BinnedSahBuilder::Config);
 // "kdtree" (options: triangle_test as bvh; traversal_cost, intersection_cost,
 // empty_bonus, max_depth: KdTreeBuilder::Config); "bsp" (options as kdtree,
-// and directions=3|7|13: BspTreeBuilder::Config); "reference" (no options:
+// and directions=3|7|13: BspTreeBuilder::Config); "grid" (options:
+// triangle_test as bvh; resolution=density|pbrt, cells_per_triangle,
+// max_resolution: UniformGridBuilder::Config); "reference" (no options:
 // float64 brute force per brick, reference_brick.h).
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options);

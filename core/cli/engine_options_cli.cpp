@@ -43,12 +43,22 @@ Status apply_proxy_options(const EngineCliOptions& cli, EngineOptions& options) 
   return Status::Ok();
 }
 
+// Whether the structure takes the triangle_test option (asked of the factory,
+// so a new structure needs no change here).
+bool takes_triangle_test(const std::string& brick_accel) {
+  return make_brick_builder(brick_accel, {{"triangle_test", "watertight"}}).ok();
+}
+
 // --triangle-test and --reference, once options.accel_options holds --accel-opt.
 Status apply_brick_structure_choices(const EngineCliOptions& cli, EngineOptions& options) {
   if (!cli.triangle_test.empty()) {
-    if (cli.brick_accel != "bvh" && cli.brick_accel != "kdtree" && cli.brick_accel != "bsp") {
-      return invalid_argument("--triangle-test needs --brick-accel bvh, kdtree or bsp (got '" +
-                              cli.brick_accel + "')");
+    if (!takes_triangle_test(cli.brick_accel)) {
+      std::string takers;
+      for (const std::string& name : brick_accel_names()) {
+        if (takes_triangle_test(name)) takers += (takers.empty() ? "" : "|") + name;
+      }
+      return invalid_argument("--triangle-test needs --brick-accel " + takers + " (got '" + cli.brick_accel +
+                              "')");
     }
     if (!options.accel_options.emplace("triangle_test", cli.triangle_test).second) {
       return invalid_argument("--triangle-test and --accel-opt triangle_test=... both given");

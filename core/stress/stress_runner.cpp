@@ -49,6 +49,8 @@ const std::vector<StressConfig>& stress_configs() {
       {"kdtree-double", "kdtree", {{"triangle_test", "double"}}, true},
       {"bsp-watertight", "bsp", {{"triangle_test", "watertight"}}, true},
       {"bsp-double", "bsp", {{"triangle_test", "double"}}, true},
+      {"grid-watertight", "grid", {{"triangle_test", "watertight"}}, true},
+      {"grid-double", "grid", {{"triangle_test", "double"}}, true},
   };
   return kConfigs;
 }

@@ -12,9 +12,10 @@
 // shared by every configuration.
 //
 // Configurations: embree, embree-robust, bvh-mt, bvh-watertight, bvh-double,
-// and the split-plane trees with the exact tests: kdtree-watertight,
-// kdtree-double, bsp-watertight, bsp-double
-// (bvh-watertight, bvh-double and the tree ones must never leak:
+// and the split-plane trees and the grid with the exact tests:
+// kdtree-watertight, kdtree-double, bsp-watertight, bsp-double,
+// grid-watertight, grid-double (bvh-watertight, bvh-double and the
+// structures with exact tests must never leak:
 // StressConfig::must_not_leak).
 //
 // Thread-safety: plain functions; run_stress uses the engine's threads for

@@ -33,6 +33,7 @@
 
 #include "core/accel/bvh/bvh_traversal.h"
 #include "core/accel/kdtree/kd_tree.h"
+#include "core/accel/triangle_mailbox.h"
 #include "core/ray/query_types.h"
 #include "core/ray/ray_types.h"
 
@@ -190,11 +191,13 @@ inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& 
   walk<kMaxKdDepth>(tree.nodes.data(), planes, segment_min, segment_max, limit, leaf, observer);
 }
 
-// Closest and any hit over the leaves a tree's traversal visits, shared by
-// the kd-tree and the BSP tree: walk(tmin, limit, leaf) runs the tree's
-// traverse(); the leaves' references index tree.refs.
-template <class Test, class View, class Walk>
-bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk) {
+// Closest and any hit over the leaves (cells) a structure's traversal
+// visits, shared by the kd-tree, the BSP tree and the grid:
+// walk(tmin, limit, leaf) runs the structure's traverse(); the leaves'
+// references index tree.refs; a reference the mailbox has seen is skipped
+// (triangle_mailbox.h).
+template <class Test, class View, class Walk, class Mailbox = NoMailbox>
+bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk, Mailbox&& mailbox = Mailbox{}) {
   float limit = ray.tfar < best.t ? ray.tfar : best.t;
   if (!(limit > ray.tnear)) return false;
   const typename Test::Prepared prepared = Test::prepare(ray);
@@ -203,6 +206,7 @@ bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk) {
   walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
     for (uint32_t k = first; k < first + count; ++k) {
       const uint32_t tri = tree.refs[k];
+      if (!mailbox.first_visit(tri)) continue;
       TriangleHit h;
       if (!Test::hit(prepared, tree.triangles[tri], ray.tnear, best_t, h)) continue;
       const BvhHitRecord& record = tree.records[tri];
@@ -223,16 +227,18 @@ bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk) {
   return true;
 }
 
-template <class Test, class View, class Walk>
-bool any_hit(const View& tree, const Ray& ray, Walk&& walk) {
+template <class Test, class View, class Walk, class Mailbox = NoMailbox>
+bool any_hit(const View& tree, const Ray& ray, Walk&& walk, Mailbox&& mailbox = Mailbox{}) {
   float limit = ray.tfar;
   if (!(limit > ray.tnear)) return false;
   const typename Test::Prepared prepared = Test::prepare(ray);
   bool hit = false;
   walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
     for (uint32_t k = first; k < first + count; ++k) {
+      const uint32_t tri = tree.refs[k];
+      if (!mailbox.first_visit(tri)) continue;
       TriangleHit h;
-      if (Test::hit(prepared, tree.triangles[tree.refs[k]], ray.tnear, best_t, h)) {
+      if (Test::hit(prepared, tree.triangles[tri], ray.tnear, best_t, h)) {
         hit = true;
         best_t = -std::numeric_limits<float>::infinity();  // ends the walk
         return true;

@@ -36,6 +36,7 @@
 
 #include "core/accel/brick_serializer.h"
 #include "core/accel/bvh/triangle_test_kind.h"
+#include "core/accel/payload_io.h"
 
 namespace outcore {
 
@@ -52,30 +53,23 @@ class SplitTreeSerializer : public BrickSerializer {
 
   Status save(const BrickAccel& accel, std::ostream& out) const override {
     const std::string name = std::string(Traits::kName) + " serialiser";
-    const auto* tree_accel = dynamic_cast<const Accel*>(&accel);
-    if (tree_accel == nullptr)
-      return invalid_argument(name + ": the brick is not a " + Traits::kName + " brick");
-    if (tree_accel->triangle_test() != test_) {
-      return invalid_argument(name + ": brick " + std::to_string(tree_accel->brick_id()) +
-                              " uses triangle test " +
-                              std::string(triangle_test_name(tree_accel->triangle_test())) + ", not " +
-                              std::string(triangle_test_name(test_)));
-    }
+    OUTCORE_ASSIGN_OR_RETURN(const Accel* tree_accel,
+                             payload_io::brick_to_save<Accel>(accel, test_, name, Traits::kName));
     const auto tree = tree_accel->view();
     try {
       cereal::BinaryOutputArchive archive(out);
       archive(static_cast<uint8_t>(test_));
-      write_zeros(archive, 7);
+      payload_io::write_zeros(archive, 7);
       archive(static_cast<uint64_t>(tree.nodes.size()), static_cast<uint64_t>(tree.refs.size()),
               static_cast<uint64_t>(tree.triangles.size()));
       const std::array<float, 6> bounds{tree.bounds.lo.x, tree.bounds.lo.y, tree.bounds.lo.z,
                                         tree.bounds.hi.x, tree.bounds.hi.y, tree.bounds.hi.z};
       archive(cereal::binary_data(bounds.data(), sizeof(bounds)));
-      write_zeros(archive, kHeaderBytes - kBoundsOffset - sizeof(bounds));
-      write_array(archive, tree.nodes);
-      write_array(archive, tree.refs);
-      write_array(archive, tree.triangles);
-      write_array(archive, tree.records);
+      payload_io::write_zeros(archive, kHeaderBytes - kBoundsOffset - sizeof(bounds));
+      payload_io::write_array(archive, tree.nodes);
+      payload_io::write_array(archive, tree.refs);
+      payload_io::write_array(archive, tree.triangles);
+      payload_io::write_array(archive, tree.records);
     } catch (const std::exception& e) {
       return io_error(name + ": " + e.what());
     }
@@ -123,10 +117,10 @@ class SplitTreeSerializer : public BrickSerializer {
     std::memcpy(bounds, bytes.data() + kBoundsOffset, sizeof(bounds));
     tree.bounds.lo = {bounds[0], bounds[1], bounds[2]};
     tree.bounds.hi = {bounds[3], bounds[4], bounds[5]};
-    read_array(tree.nodes, counts[0], bytes, kHeaderBytes);
-    read_array(tree.refs, counts[1], bytes, refs_at);
-    read_array(tree.triangles, counts[2], bytes, triangles_at);
-    read_array(tree.records, counts[2], bytes, records_at);
+    payload_io::read_array(tree.nodes, counts[0], bytes, kHeaderBytes);
+    payload_io::read_array(tree.refs, counts[1], bytes, refs_at);
+    payload_io::read_array(tree.triangles, counts[2], bytes, triangles_at);
+    payload_io::read_array(tree.records, counts[2], bytes, records_at);
     if (!payload.known_good) {
       for (const float b : bounds) {
         if (std::isnan(b)) return invalid_argument(what + ": the tree's bounds are NaN");
@@ -140,22 +134,6 @@ class SplitTreeSerializer : public BrickSerializer {
  private:
   static constexpr uint64_t kHeaderBytes = 64;
   static constexpr uint64_t kBoundsOffset = 32;
-
-  template <class Archive>
-  static void write_zeros(Archive& archive, uint64_t bytes) {
-    static constexpr std::array<char, kHeaderBytes> kZeros{};
-    archive(cereal::binary_data(kZeros.data(), bytes));
-  }
-  template <class Archive, class T>
-  static void write_array(Archive& archive, std::span<const T> values) {
-    if (!values.empty()) archive(cereal::binary_data(values.data(), values.size_bytes()));
-  }
-  // An empty vector's data() may be null, which memcpy must not be given.
-  template <class T>
-  static void read_array(std::vector<T>& out, uint64_t count, std::span<const char> bytes, uint64_t offset) {
-    out.resize(count);
-    if (!out.empty()) std::memcpy(out.data(), bytes.data() + offset, out.size() * sizeof(T));
-  }
 
   TriangleTest test_;
   std::string key_;

@@ -1,9 +1,10 @@
-// Test helpers shared by the split-plane trees' tests (kd_tree_test.cpp,
-// bsp/bsp_test.cpp): the float64-free brute force over a tree's own
-// triangles with a given triangle test, the bitwise comparison of a tree's
-// walks (closest and any hit) against it for every test, and the rays both
-// use. Walks names the tree's traversal: closest<Test>(view, ray, hit) and
-// any<Test>(view, ray).
+// Test helpers shared by the tests of the structures over triangle
+// references (kd_tree_test.cpp, bsp/bsp_test.cpp, grid/uniform_grid_test.cpp):
+// the brute force over a structure's own triangles with a given triangle
+// test, the bitwise comparison of its walks (closest and any hit) against it
+// for every test, and the rays they use. Walks names the traversal:
+// closest<Test>(view, ray, hit) and any<Test>(view, ray); a view has
+// triangles, records and validate().
 //
 // Thread-safety: test code; call from the test's thread.
 #pragma once
@@ -34,8 +35,8 @@ inline BrickData usable(const BrickData& brick) {
 }
 
 // Brute force with Test over the tree's own triangles.
-template <class Test, class Node>
-void brute_force(const SplitTreeView<Node>& tree, const Ray& ray, Hit& best, bool& any) {
+template <class Test, class View>
+void brute_force(const View& tree, const Ray& ray, Hit& best, bool& any) {
   const typename Test::Prepared prepared = Test::prepare(ray);
   const float tfar = ray.tfar < best.t ? ray.tfar : best.t;
   uint32_t found = kInvalidId;
@@ -62,10 +63,10 @@ void brute_force(const SplitTreeView<Node>& tree, const Ray& ray, Hit& best, boo
   best.normal = tree.records[found].normal;
 }
 
-template <class Test, class Walks, class Node>
-void expect_matches_brute_force(const std::string& what, const SplitTree<Node>& tree,
-                                const std::vector<Ray>& rays, std::size_t min_hits) {
-  const SplitTreeView<Node> view = tree.view();
+template <class Test, class Walks, class Tree>
+void expect_matches_brute_force(const std::string& what, const Tree& tree, const std::vector<Ray>& rays,
+                                std::size_t min_hits) {
+  const auto view = tree.view();
   std::size_t hits = 0, differ = 0;
   for (std::size_t i = 0; i < rays.size(); ++i) {
     Hit want, got;
@@ -87,9 +88,9 @@ void expect_matches_brute_force(const std::string& what, const SplitTree<Node>& 
 }
 
 // Every triangle test, bitwise against its brute force.
-template <class Walks, class Node>
-void expect_every_test_matches(const std::string& what, const SplitTree<Node>& tree,
-                               const std::vector<Ray>& rays, std::size_t min_hits) {
+template <class Walks, class Tree>
+void expect_every_test_matches(const std::string& what, const Tree& tree, const std::vector<Ray>& rays,
+                               std::size_t min_hits) {
   ASSERT_TRUE(tree.view().validate().ok()) << what;
   expect_matches_brute_force<WatertightTriangleTest, Walks>(what + " watertight", tree, rays, min_hits);
   expect_matches_brute_force<MtTriangleTest, Walks>(what + " mt", tree, rays, min_hits / 2);

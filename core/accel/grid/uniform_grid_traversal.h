@@ -1,0 +1,167 @@
+// Traversal of a UniformGridView for one ray by 3D-DDA (Amanatides & Woo
+// 1987): the ray's segment is clipped to the grid's bounds, the cell holding
+// its start is found, and the walk steps from cell to cell in the order the
+// ray crosses their boundaries, testing each cell's triangles; it stops at
+// the first cell whose best hit lies before the next boundary crossing (a
+// triangle spanning several cells must not end the walk early with a
+// farther hit), at the end of the segment, or at any hit (occlusion).
+//
+// Conservative in float, as the kd-tree's walk: every boundary crossing
+// (boundary - origin) / direction is widened by kBoxMargin (relative) into
+// an interval [lo, hi], and the walk keeps, per axis, the run of cells the
+// ray may be in given those intervals (usually one; two for the moment
+// between lo and hi), visiting every cell of the runs' product once. So a
+// ray through a cell corner or along an edge visits every cell it may touch
+// in float, a hit just past a boundary never hides a nearer or equal one in
+// the next cell, and the walk stops only when the next cell's widened entry
+// lies beyond the best hit. A ray parallel to an axis stays in the cells
+// holding its origin along it (a point on a boundary is in both cells'
+// closed boxes, and the builder files triangles by closed boxes).
+//
+// Mailboxing: a triangle spanning several cells is tested once per ray —
+// the leaf loop asks a small per-ray TriangleMailbox (on the stack, direct
+// mapped) before testing; a triangle evicted from it is merely tested again,
+// with the same answer.
+//
+// Thread-safety: pure functions over an immutable grid.
+#pragma once
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <limits>
+
+#include "core/accel/grid/uniform_grid.h"
+#include "core/accel/kdtree/kd_tree_traversal.h"
+#include "core/ray/ray_types.h"
+
+namespace outcore {
+namespace grid_detail {
+
+inline constexpr float kInf = std::numeric_limits<float>::infinity();
+
+// One axis of the walk. Cells along it are counted in the ray's travel
+// order (k = 0 first); the ray may be in cells back .. front.
+struct AxisRun {
+  uint32_t back = 0, front = 0;
+  uint32_t cells = 1;
+  bool forward = true;
+  bool moving = false;      // direction along the axis is not zero
+  float next_entry = kInf;  // widened start of cell front + 1's part, or inf
+
+  uint32_t cell(uint32_t k) const { return forward ? k : cells - 1 - k; }
+};
+
+// The widened t at which the ray crosses from travel cell k into k + 1.
+struct Crossing {
+  float lo, hi;
+};
+inline Crossing crossing(const UniformGridView& grid, int axis, const AxisRun& run, const Ray& ray,
+                         float inverse_direction, uint32_t k) {
+  const uint32_t cell = run.cell(k);
+  const uint32_t boundary_index = run.forward ? cell + 1 : cell;
+  const float t = (grid.boundary(axis, boundary_index) - ray.origin[axis]) * inverse_direction;
+  // NaN: a direction so small its inverse overflowed and the origin on the
+  // boundary; the crossing time is unknown, so the ray may be on either side.
+  if (t != t) return {-kInf, kInf};
+  return {kd_detail::widen_down(t), kd_detail::widen_up(t)};
+}
+
+// Calls leaf(first, count, limit) for the cells the segment [tmin, limit]
+// may touch, front to back; leaf returns true to stop the walk (any hit).
+// `limit` is the best hit so far (leaf lowers it).
+template <class Leaf>
+inline void traverse(const UniformGridView& grid, const Ray& ray, float tmin, float& limit, Leaf&& leaf) {
+  if (grid.cell_starts.empty()) return;
+  const bvh_detail::BoxRay box_ray(ray);
+  float segment_min, segment_max;
+  if (!kd_detail::clip_to_bounds(grid.bounds, ray, box_ray, tmin, limit, segment_min, segment_max)) return;
+
+  std::array<AxisRun, 3> runs;
+  for (int a = 0; a < 3; ++a) {
+    AxisRun& run = runs[a];
+    run.cells = grid.resolution[a];
+    run.moving = ray.direction[a] != 0.0f;
+    run.forward = ray.direction[a] >= 0.0f;
+    const float at_start = run.moving ? ray.origin[a] + segment_min * ray.direction[a] : ray.origin[a];
+    const uint32_t start = run.cell(grid.highest_cell_holding(a, at_start));  // cell(k) is its own inverse
+    run.back = run.front = start;
+    if (run.moving) {
+      const float inv = box_ray.inverse_direction[a];
+      // The start cell may be off by rounding: widen the run to every cell
+      // the ray may be in at segment_min.
+      while (run.back > 0 && crossing(grid, a, run, ray, inv, run.back - 1).hi >= segment_min) --run.back;
+      while (run.front + 1 < run.cells && crossing(grid, a, run, ray, inv, run.front).lo <= segment_min)
+        ++run.front;
+      if (run.front + 1 < run.cells) run.next_entry = crossing(grid, a, run, ray, inv, run.front).lo;
+    }
+  }
+
+  const uint32_t rx = grid.resolution[0], ry = grid.resolution[1];
+  const uint32_t* starts = grid.cell_starts.data();
+  // Visits the cells in the product of the runs, axis `fixed` pinned to its
+  // front cell (or every cell of every run when fixed < 0).
+  auto visit = [&](int fixed) {
+    std::array<uint32_t, 3> from, to;
+    for (int a = 0; a < 3; ++a) {
+      from[a] = a == fixed ? runs[a].front : runs[a].back;
+      to[a] = runs[a].front;
+    }
+    for (uint32_t kz = from[2]; kz <= to[2]; ++kz) {
+      for (uint32_t ky = from[1]; ky <= to[1]; ++ky) {
+        for (uint32_t kx = from[0]; kx <= to[0]; ++kx) {
+          const uint32_t c = runs[0].cell(kx) + rx * (runs[1].cell(ky) + ry * runs[2].cell(kz));
+          const uint32_t first = starts[c], end = starts[c + 1];
+          if (first != end && leaf(first, end - first, limit)) return true;
+        }
+      }
+    }
+    return false;
+  };
+
+  if (visit(-1)) return;
+  while (true) {
+    int axis = 0;
+    if (runs[1].next_entry < runs[axis].next_entry) axis = 1;
+    if (runs[2].next_entry < runs[axis].next_entry) axis = 2;
+    const float entry = runs[axis].next_entry;
+    // Also ends the walk when no axis has a cell left (entry is inf).
+    if (!(entry <= limit && entry <= segment_max)) return;
+    // Cells the ray has surely left by `entry` drop out of the runs.
+    for (int a = 0; a < 3; ++a) {
+      AxisRun& run = runs[a];
+      while (run.back < run.front &&
+             crossing(grid, a, run, ray, box_ray.inverse_direction[a], run.back).hi < entry)
+        ++run.back;
+    }
+    AxisRun& run = runs[axis];
+    ++run.front;
+    run.next_entry = run.front + 1 < run.cells
+                         ? crossing(grid, axis, run, ray, box_ray.inverse_direction[axis], run.front).lo
+                         : kInf;
+    if (visit(axis)) return;
+  }
+}
+
+}  // namespace grid_detail
+
+// Closest hit of `ray` over (tnear, min(tfar, best.t)], replacing best when a
+// triangle beats it by hit_is_better(). Returns whether best changed.
+template <class Test, class Mailbox = TriangleMailbox>
+bool grid_closest_hit(const UniformGridView& grid, const Ray& ray, Hit& best, Mailbox&& mailbox = {}) {
+  return kd_detail::closest_hit<Test>(
+      grid, ray, best,
+      [&](float tmin, float& limit, auto&& leaf) { grid_detail::traverse(grid, ray, tmin, limit, leaf); },
+      mailbox);
+}
+
+// Any hit of `ray` in (tnear, tfar]; stops at the first.
+template <class Test, class Mailbox = TriangleMailbox>
+bool grid_any_hit(const UniformGridView& grid, const Ray& ray, Mailbox&& mailbox = {}) {
+  return kd_detail::any_hit<Test>(
+      grid, ray,
+      [&](float tmin, float& limit, auto&& leaf) { grid_detail::traverse(grid, ray, tmin, limit, leaf); },
+      mailbox);
+}
+
+}  // namespace outcore

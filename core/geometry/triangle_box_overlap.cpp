@@ -1,0 +1,45 @@
+#include "core/geometry/triangle_box_overlap.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace outcore {
+namespace {
+
+// Rounding of the float64 projections below is ~1e-16 of the magnitudes
+// involved; this relative slack, far above it, keeps the test conservative.
+constexpr double kRelativeSlack = 0x1p-40;
+
+// Whether axis separates the triangle (vertices a, b, c relative to the box
+// center) from the box of half extent h.
+bool separates(const Vec3d& axis, const Vec3d& a, const Vec3d& b, const Vec3d& c, const Vec3d& h) {
+  const double pa = dot(axis, a), pb = dot(axis, b), pc = dot(axis, c);
+  const double radius = h.x * std::abs(axis.x) + h.y * std::abs(axis.y) + h.z * std::abs(axis.z);
+  const double scale = radius + std::max({std::abs(pa), std::abs(pb), std::abs(pc)});
+  const double slack = scale * kRelativeSlack;
+  return std::min({pa, pb, pc}) > radius + slack || std::max({pa, pb, pc}) < -radius - slack;
+}
+
+}  // namespace
+
+bool triangle_may_touch_box(const Triangle& triangle, const Vec3d& lo, const Vec3d& hi, double margin) {
+  const Vec3d center = (lo + hi) * 0.5;
+  const Vec3d h = (hi - lo) * 0.5 + Vec3d(margin, margin, margin);
+  const Vec3d a = Vec3d(triangle.v0) - center;
+  const Vec3d b = Vec3d(triangle.v1) - center;
+  const Vec3d c = Vec3d(triangle.v2) - center;
+  const Vec3d unit[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  for (const Vec3d& axis : unit) {
+    if (separates(axis, a, b, c, h)) return false;
+  }
+  const Vec3d edges[3] = {b - a, c - b, a - c};
+  if (separates(cross(edges[0], edges[1]), a, b, c, h)) return false;
+  for (const Vec3d& edge : edges) {
+    for (const Vec3d& axis : unit) {
+      if (separates(cross(edge, axis), a, b, c, h)) return false;
+    }
+  }
+  return true;
+}
+
+}  // namespace outcore
