@@ -36,11 +36,17 @@ SCENES = {
     "bunny": [os.path.join(ROOT, "tests", "data", "models", "stanford-bunny.obj")],
     "tilted": ["gen:city?of=(gen:terrain?n=24&size=2&height=0.1)&copies=400&spacing=3&tilt=30"],
     "city": ["gen:city?of=(gen:sphere?level=5)&copies=732"],
+    # The teapot in a stadium (issue 25): a 1-unit sphere of 82k triangles
+    # in a 2000-unit open box, packed as one brick so that one structure must
+    # hold both scales.
+    "stadium": ["gen:stadium?level=6"],
+    # A 2.5D height field (the quadtree's and the grid's home ground).
+    "terrain": ["gen:terrain?n=400&size=100&height=3"],
 }
 CACHE_MB = 8192
 # Bricks of 4k triangles on the tilted city: ~110 oblique slabs, enough
 # bricks for the bounds to matter (the default 32k makes 19).
-PACK_OPTIONS = {"tilted": ("--brick-tris", "4096")}
+PACK_OPTIONS = {"tilted": ("--brick-tris", "4096"), "stadium": ("--brick-tris", "1000000")}
 
 
 def trace(store, rays_path, runs, extra):

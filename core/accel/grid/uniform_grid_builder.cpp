@@ -101,16 +101,20 @@ bool file_triangles(const UniformGridView& grid, std::span<const Triangle> trian
   };
   for (uint32_t k = 0; k < triangles.size(); ++k) {
     const Aabb box = triangles[k].bounds();
-    std::array<uint32_t, 3> first, last;
+    std::array<uint32_t, 3> first{}, last{};
     for (int a = 0; a < 3; ++a) {
       first[a] = grid.lowest_cell_holding(a, box.lo[a]);
       last[a] = grid.highest_cell_holding(a, box.hi[a]);
     }
-    const bool one_cell = first == last;
+    // A triangle is connected, so its projection on an axis covers every
+    // cell its bounds span there: when its bounds span one row of cells (at
+    // most one axis with more than one), it touches all of them.
+    const int spread_axes = (first[0] != last[0]) + (first[1] != last[1]) + (first[2] != last[2]);
+    const bool test_each_cell = spread_axes > 1;
     for (uint32_t z = first[2]; z <= last[2]; ++z) {
       for (uint32_t y = first[1]; y <= last[1]; ++y) {
         for (uint32_t x = first[0]; x <= last[0]; ++x) {
-          if (!one_cell) {
+          if (test_each_cell) {
             const Vec3d lo(cell_lo(0, x), cell_lo(1, y), cell_lo(2, z));
             const Vec3d hi(cell_hi(0, x), cell_hi(1, y), cell_hi(2, z));
             if (!triangle_may_touch_box(triangles[k], lo, hi, box_margin)) continue;

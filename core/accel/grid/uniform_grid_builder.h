@@ -1,7 +1,8 @@
 // UniformGridBuilder: a UniformGrid over a brick's triangles in linear time
 // (Lagae & Dutré 2008): the resolution from a rule, every triangle filed
 // under the cells its bounds span that it may touch (the separating-axis
-// test, triangle_box_overlap.h, for triangles spanning more than one cell),
+// test, triangle_box_overlap.h, for triangles whose bounds span cells along
+// more than one axis),
 // then one counting sort of the (cell, triangle) pairs into the compact
 // arrays. Within a cell, triangles keep their input order.
 //

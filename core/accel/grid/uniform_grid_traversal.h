@@ -46,8 +46,9 @@ struct AxisRun {
   uint32_t back = 0, front = 0;
   uint32_t cells = 1;
   bool forward = true;
-  bool moving = false;      // direction along the axis is not zero
+  float origin = 0, inverse_direction = 0;
   float next_entry = kInf;  // widened start of cell front + 1's part, or inf
+  float back_exit = kInf;   // widened end of cell back's part, or inf (the last cell)
 
   uint32_t cell(uint32_t k) const { return forward ? k : cells - 1 - k; }
 };
@@ -56,15 +57,35 @@ struct AxisRun {
 struct Crossing {
   float lo, hi;
 };
-inline Crossing crossing(const UniformGridView& grid, int axis, const AxisRun& run, const Ray& ray,
-                         float inverse_direction, uint32_t k) {
+inline Crossing crossing(const UniformGridView& grid, int axis, const AxisRun& run, uint32_t k) {
   const uint32_t cell = run.cell(k);
   const uint32_t boundary_index = run.forward ? cell + 1 : cell;
-  const float t = (grid.boundary(axis, boundary_index) - ray.origin[axis]) * inverse_direction;
+  const float t = (grid.boundary(axis, boundary_index) - run.origin) * run.inverse_direction;
   // NaN: a direction so small its inverse overflowed and the origin on the
   // boundary; the crossing time is unknown, so the ray may be on either side.
   if (t != t) return {-kInf, kInf};
   return {kd_detail::widen_down(t), kd_detail::widen_up(t)};
+}
+
+// The run of cells along `axis` the ray may be in at t = start.
+inline AxisRun start_run(const UniformGridView& grid, int axis, const Ray& ray, float inverse_direction,
+                         float start) {
+  AxisRun run;
+  run.cells = grid.resolution[axis];
+  run.forward = ray.direction[axis] >= 0.0f;
+  run.origin = ray.origin[axis];
+  run.inverse_direction = inverse_direction;
+  const bool moving = ray.direction[axis] != 0.0f;
+  const float at_start = moving ? ray.origin[axis] + start * ray.direction[axis] : ray.origin[axis];
+  run.back = run.front = run.cell(grid.highest_cell_holding(axis, at_start));  // cell() is its own inverse
+  if (!moving) return run;
+  // The start cell may be off by rounding: widen the run to every cell the
+  // ray may be in at `start`.
+  while (run.back > 0 && crossing(grid, axis, run, run.back - 1).hi >= start) --run.back;
+  while (run.front + 1 < run.cells && crossing(grid, axis, run, run.front).lo <= start) ++run.front;
+  if (run.front + 1 < run.cells) run.next_entry = crossing(grid, axis, run, run.front).lo;
+  if (run.back + 1 < run.cells) run.back_exit = crossing(grid, axis, run, run.back).hi;
+  return run;
 }
 
 // Calls leaf(first, count, limit) for the cells the segment [tmin, limit]
@@ -76,32 +97,23 @@ inline void traverse(const UniformGridView& grid, const Ray& ray, float tmin, fl
   const bvh_detail::BoxRay box_ray(ray);
   float segment_min, segment_max;
   if (!kd_detail::clip_to_bounds(grid.bounds, ray, box_ray, tmin, limit, segment_min, segment_max)) return;
-
   std::array<AxisRun, 3> runs;
-  for (int a = 0; a < 3; ++a) {
-    AxisRun& run = runs[a];
-    run.cells = grid.resolution[a];
-    run.moving = ray.direction[a] != 0.0f;
-    run.forward = ray.direction[a] >= 0.0f;
-    const float at_start = run.moving ? ray.origin[a] + segment_min * ray.direction[a] : ray.origin[a];
-    const uint32_t start = run.cell(grid.highest_cell_holding(a, at_start));  // cell(k) is its own inverse
-    run.back = run.front = start;
-    if (run.moving) {
-      const float inv = box_ray.inverse_direction[a];
-      // The start cell may be off by rounding: widen the run to every cell
-      // the ray may be in at segment_min.
-      while (run.back > 0 && crossing(grid, a, run, ray, inv, run.back - 1).hi >= segment_min) --run.back;
-      while (run.front + 1 < run.cells && crossing(grid, a, run, ray, inv, run.front).lo <= segment_min)
-        ++run.front;
-      if (run.front + 1 < run.cells) run.next_entry = crossing(grid, a, run, ray, inv, run.front).lo;
-    }
-  }
+  for (int a = 0; a < 3; ++a) runs[a] = start_run(grid, a, ray, box_ray.inverse_direction[a], segment_min);
 
   const uint32_t rx = grid.resolution[0], ry = grid.resolution[1];
   const uint32_t* starts = grid.cell_starts.data();
+  auto visit_cell = [&](uint32_t x, uint32_t y, uint32_t z) {
+    const uint32_t c = x + rx * (y + ry * z);
+    const uint32_t first = starts[c], end = starts[c + 1];
+    return first != end && leaf(first, end - first, limit);
+  };
   // Visits the cells in the product of the runs, axis `fixed` pinned to its
   // front cell (or every cell of every run when fixed < 0).
   auto visit = [&](int fixed) {
+    if (runs[0].back == runs[0].front && runs[1].back == runs[1].front && runs[2].back == runs[2].front) {
+      return visit_cell(runs[0].cell(runs[0].front), runs[1].cell(runs[1].front),
+                        runs[2].cell(runs[2].front));
+    }
     std::array<uint32_t, 3> from, to;
     for (int a = 0; a < 3; ++a) {
       from[a] = a == fixed ? runs[a].front : runs[a].back;
@@ -110,9 +122,7 @@ inline void traverse(const UniformGridView& grid, const Ray& ray, float tmin, fl
     for (uint32_t kz = from[2]; kz <= to[2]; ++kz) {
       for (uint32_t ky = from[1]; ky <= to[1]; ++ky) {
         for (uint32_t kx = from[0]; kx <= to[0]; ++kx) {
-          const uint32_t c = runs[0].cell(kx) + rx * (runs[1].cell(ky) + ry * runs[2].cell(kz));
-          const uint32_t first = starts[c], end = starts[c + 1];
-          if (first != end && leaf(first, end - first, limit)) return true;
+          if (visit_cell(runs[0].cell(kx), runs[1].cell(ky), runs[2].cell(kz))) return true;
         }
       }
     }
@@ -128,17 +138,15 @@ inline void traverse(const UniformGridView& grid, const Ray& ray, float tmin, fl
     // Also ends the walk when no axis has a cell left (entry is inf).
     if (!(entry <= limit && entry <= segment_max)) return;
     // Cells the ray has surely left by `entry` drop out of the runs.
-    for (int a = 0; a < 3; ++a) {
-      AxisRun& run = runs[a];
-      while (run.back < run.front &&
-             crossing(grid, a, run, ray, box_ray.inverse_direction[a], run.back).hi < entry)
+    for (AxisRun& run : runs) {
+      while (run.back < run.front && run.back_exit < entry) {
         ++run.back;
+        run.back_exit = crossing(grid, static_cast<int>(&run - runs.data()), run, run.back).hi;
+      }
     }
     AxisRun& run = runs[axis];
     ++run.front;
-    run.next_entry = run.front + 1 < run.cells
-                         ? crossing(grid, axis, run, ray, box_ray.inverse_direction[axis], run.front).lo
-                         : kInf;
+    run.next_entry = run.front + 1 < run.cells ? crossing(grid, axis, run, run.front).lo : kInf;
     if (visit(axis)) return;
   }
 }
