@@ -143,22 +143,7 @@ TEST(Bsp, MatchesBruteForceOnGeneratedScenesSoupsTheBunnyAndARotatedCity) {
 
 TEST(Bsp, AimedAtVerticesAndEdgesOfAClosedMeshItLeaksNothingAtAnyOffset) {
   for (const float offset : {0.0f, 1e3f, 1e6f}) {
-    BrickData sphere = load_brick_from("gen:sphere?level=3");
-    const float scale = std::max(1.0f, offset * 1e-3f);
-    for (Triangle& tri : sphere.triangles) {
-      for (Vec3f* v : {&tri.v0, &tri.v1, &tri.v2}) *v = *v * scale + Vec3f(offset, -0.5f * offset, offset);
-    }
-    const Vec3f interior = bounds_of(sphere).center() + Vec3f(0.01f, 0.02f, -0.03f) * scale;
-    std::vector<Ray> rays;
-    for (const Triangle& tri : sphere.triangles) {
-      for (const Vec3f& target :
-           {tri.v0, tri.v1, tri.v2, (tri.v0 + tri.v1) * 0.5f, (tri.v1 + tri.v2) * 0.5f}) {
-        Ray ray;
-        ray.origin = interior;
-        ray.direction = target - interior;
-        rays.push_back(ray);
-      }
-    }
+    const auto [sphere, rays] = split_tree_test::aimed_sphere(offset);
     const BspTree tree = build_tree(sphere);
     const std::string what = "aimed sphere +" + std::to_string(offset);
     expect_every_test_matches(what, tree, rays, rays.size());

@@ -11,7 +11,9 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <random>
 #include <set>
@@ -89,22 +91,7 @@ TEST(UniformGrid, MatchesBruteForceOnGeneratedScenesSoupsAndTheBunny) {
 
 TEST(UniformGrid, AimedAtVerticesAndEdgesOfAClosedMeshItLeaksNothingAtAnyOffset) {
   for (const float offset : {0.0f, 1e3f, 1e6f}) {
-    BrickData sphere = load_brick_from("gen:sphere?level=3");
-    const float scale = std::max(1.0f, offset * 1e-3f);
-    for (Triangle& tri : sphere.triangles) {
-      for (Vec3f* v : {&tri.v0, &tri.v1, &tri.v2}) *v = *v * scale + Vec3f(offset, -0.5f * offset, offset);
-    }
-    const Vec3f interior = bounds_of(sphere).center() + Vec3f(0.01f, 0.02f, -0.03f) * scale;
-    std::vector<Ray> rays;
-    for (const Triangle& tri : sphere.triangles) {
-      for (const Vec3f& target :
-           {tri.v0, tri.v1, tri.v2, (tri.v0 + tri.v1) * 0.5f, (tri.v1 + tri.v2) * 0.5f}) {
-        Ray ray;
-        ray.origin = interior;
-        ray.direction = target - interior;
-        rays.push_back(ray);
-      }
-    }
+    const auto [sphere, rays] = split_tree_test::aimed_sphere(offset);
     // A fine grid, so that many vertices lie near cell boundaries.
     UniformGridBuilder::Config fine;
     fine.cells_per_triangle = 8;
@@ -262,6 +249,45 @@ TEST(UniformGrid, MailboxingSavesTestsAndChangesNoAnswer) {
     saved += counting.saved;
   }
   EXPECT_GT(saved, references / 10) << saved << " of " << references;
+}
+
+// Not part of the suite (docs/BENCHMARKS.md, "Grids"): the references a
+// walk reaches and the triangle tests the mailbox saves, per ray, and the
+// time with and without it, at the default resolution and a fine one.
+// build/tests/outcore_tests --gtest_also_run_disabled_tests
+//   --gtest_filter='*MeasureMailboxing'
+TEST(UniformGrid, DISABLED_MeasureMailboxing) {
+  for (const std::string& spec : {accel_test::bunny_path(), std::string("gen:terrain?n=200&size=20&height=1"),
+                                  std::string("gen:stadium?level=5")}) {
+    const BrickData brick = load_brick_from(spec);
+    const auto rays = mixed_rays(brick, 200000, 77);
+    for (const float lambda : {2.0f, 8.0f}) {
+      UniformGridBuilder::Config config;
+      config.cells_per_triangle = lambda;
+      const UniformGrid grid = build_grid(brick, config);
+      CountingMailbox<TriangleMailbox> counting;
+      const auto t0 = std::chrono::steady_clock::now();
+      for (const Ray& ray : rays) {
+        Hit hit;
+        grid_closest_hit<WatertightTriangleTest>(grid.view(), ray, hit, counting);
+      }
+      const auto t1 = std::chrono::steady_clock::now();
+      for (const Ray& ray : rays) {
+        Hit hit;
+        grid_closest_hit<WatertightTriangleTest>(grid.view(), ray, hit, NoMailbox{});
+      }
+      const auto t2 = std::chrono::steady_clock::now();
+      const double n = static_cast<double>(rays.size());
+      std::printf(
+          "%s lambda %.0f: %u x %u x %u cells, %.2f refs/triangle; per ray %.1f references, %.1f tests "
+          "saved (%.0f %%); %.3f s with the mailbox, %.3f s without\n",
+          spec.c_str(), lambda, grid.resolution[0], grid.resolution[1], grid.resolution[2],
+          static_cast<double>(grid.refs.size()) / static_cast<double>(grid.triangles.size()),
+          static_cast<double>(counting.references) / n, static_cast<double>(counting.saved) / n,
+          100.0 * static_cast<double>(counting.saved) / static_cast<double>(counting.references),
+          std::chrono::duration<double>(t1 - t0).count(), std::chrono::duration<double>(t2 - t1).count());
+    }
+  }
 }
 
 TEST(UniformGrid, ResolutionFollowsTheRuleAndTheBudgets) {

@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -110,6 +111,32 @@ inline std::vector<Ray> mixed_rays(const BrickData& brick, std::size_t n, uint64
     if (i % 13 == 6) rays[i].tnear = -0.5f * length(b.extent());
   }
   return rays;
+}
+
+// A closed icosphere (level 3) moved to `offset` and scaled with it, and rays
+// from an interior point aimed exactly at every vertex and edge midpoint
+// (direction = target - origin in float): a watertight walk leaks none.
+struct AimedSphere {
+  BrickData sphere;
+  std::vector<Ray> rays;
+};
+inline AimedSphere aimed_sphere(float offset) {
+  AimedSphere out;
+  out.sphere = accel_test::load_brick_from("gen:sphere?level=3");
+  const float scale = std::max(1.0f, offset * 1e-3f);
+  for (Triangle& tri : out.sphere.triangles) {
+    for (Vec3f* v : {&tri.v0, &tri.v1, &tri.v2}) *v = *v * scale + Vec3f(offset, -0.5f * offset, offset);
+  }
+  const Vec3f interior = accel_test::bounds_of(out.sphere).center() + Vec3f(0.01f, 0.02f, -0.03f) * scale;
+  for (const Triangle& tri : out.sphere.triangles) {
+    for (const Vec3f& target : {tri.v0, tri.v1, tri.v2, (tri.v0 + tri.v1) * 0.5f, (tri.v1 + tri.v2) * 0.5f}) {
+      Ray ray;
+      ray.origin = interior;
+      ray.direction = target - interior;
+      out.rays.push_back(ray);
+    }
+  }
+  return out;
 }
 
 }  // namespace outcore::split_tree_test
