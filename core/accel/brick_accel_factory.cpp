@@ -8,6 +8,7 @@
 #include "core/accel/embree_brick.h"
 #include "core/accel/grid/grid_brick.h"
 #include "core/accel/kdtree/kd_tree_brick.h"
+#include "core/accel/octree/octree_brick.h"
 #include "core/accel/reference_brick.h"
 #include "core/util/parse_number.h"
 
@@ -170,6 +171,26 @@ Expected<std::unique_ptr<BrickBuilder>> make_grid_builder(const BrickAccelOption
   return std::unique_ptr<BrickBuilder>(new GridBrickBuilder(config));
 }
 
+// Defaults: watertight and OctreeBuilder::Config's (leaves of up to 8
+// triangles, depth 16).
+Expected<std::unique_ptr<BrickBuilder>> make_octree_builder(const BrickAccelOptions& options) {
+  OctreeBrickConfig config;
+  for (const auto& [key, value] : options) {
+    if (key == "triangle_test") {
+      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("octree", value, config.triangle_test));
+      continue;
+    }
+    OUTCORE_ASSIGN_OR_RETURN(const bool known, config.builder.parse_option("octree", key, value));
+    if (!known) {
+      return invalid_argument("brick accel octree: unknown option '" + key +
+                              "' (known: triangle_test, max_leaf_size, max_depth)");
+    }
+  }
+  const Status valid = config.builder.validate();
+  if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
+  return std::unique_ptr<BrickBuilder>(new OctreeBrickBuilder(config));
+}
+
 Expected<std::unique_ptr<BrickBuilder>> make_reference_builder(const BrickAccelOptions& options) {
   if (!options.empty()) {
     return invalid_argument("brick accel reference: unknown option '" + options.begin()->first +
@@ -185,8 +206,10 @@ struct BrickStructureEntry {
   Expected<std::unique_ptr<BrickBuilder>> (*make)(const BrickAccelOptions& options);
 };
 constexpr BrickStructureEntry kBrickStructures[] = {
-    {"embree", make_embree_builder}, {"bvh", make_bvh_builder},   {"kdtree", make_kdtree_builder},
-    {"bsp", make_bsp_builder},       {"grid", make_grid_builder}, {"reference", make_reference_builder},
+    {"embree", make_embree_builder},       {"bvh", make_bvh_builder},
+    {"kdtree", make_kdtree_builder},       {"bsp", make_bsp_builder},
+    {"grid", make_grid_builder},           {"octree", make_octree_builder},
+    {"reference", make_reference_builder},
 };
 
 }  // namespace

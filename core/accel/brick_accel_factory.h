@@ -1,4 +1,5 @@
-// Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "grid", "reference") with options
+// Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "grid", "octree",
+// "reference") with options
 // given as key=value strings; unknown names and unknown or malformed options
 // are errors, never ignored. The returned BrickBuilder turns a loaded brick into
 // a BrickAccel.
@@ -65,7 +66,9 @@ inline constexpr const char* kDefaultBrickAccel = "bvh";
 // empty_bonus, max_depth: KdTreeBuilder::Config); "bsp" (options as kdtree,
 // and directions=3|7|13: BspTreeBuilder::Config); "grid" (options:
 // triangle_test as bvh; resolution=density|pbrt, cells_per_triangle,
-// max_resolution: UniformGridBuilder::Config); "reference" (no options:
+// max_resolution: UniformGridBuilder::Config); "octree" (options:
+// triangle_test as bvh; max_leaf_size, max_depth: OctreeBuilder::Config);
+// "reference" (no options:
 // float64 brute force per brick, reference_brick.h).
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options);

@@ -121,7 +121,8 @@ void add_stress_command(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand("stress", "Numerical stress suite: leaks and errors per configuration");
   cmd->add_option("--config", args->config,
                   "all, embree, embree-robust, bvh-mt, bvh-watertight, bvh-double, kdtree-watertight, "
-                  "kdtree-double, bsp-watertight, bsp-double, grid-watertight or grid-double")
+                  "kdtree-double, bsp-watertight, bsp-double, grid-watertight, grid-double, "
+                  "octree-watertight or octree-double")
       ->capture_default_str();
   cmd->add_flag("--quick", args->quick, "Smaller generated meshes and fewer reference checks");
   auto* models =

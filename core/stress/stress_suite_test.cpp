@@ -157,6 +157,16 @@ TEST(StressSuite, GridDoubleNeverLeaksAndAgreesWithTheReference) {
   expect_watertight("grid-double", true);
 }
 
+// The octree (issue 25), likewise: its walk is conservative at middle planes
+// and where eight cells meet.
+TEST(StressSuite, OctreeWatertightNeverLeaks) {
+  expect_watertight("octree-watertight", false);
+}
+
+TEST(StressSuite, OctreeDoubleNeverLeaksAndAgreesWithTheReference) {
+  expect_watertight("octree-double", true);
+}
+
 // The suite is not vacuous: Möller–Trumbore in float leaks through shared
 // vertices and edges somewhere in it.
 TEST(StressSuite, MollerTrumboreLeaksSomewhere) {
@@ -171,7 +181,7 @@ TEST(StressSuite, MollerTrumboreLeaksSomewhere) {
 }
 
 TEST(StressSuite, ConfigSelectionRejectsUnknownNames) {
-  EXPECT_EQ(select_stress_configs("all")->size(), 11u);
+  EXPECT_EQ(select_stress_configs("all")->size(), 13u);
   EXPECT_EQ(select_stress_configs("bvh-mt")->front().name, "bvh-mt");
   const auto bad = select_stress_configs("bvh");
   ASSERT_FALSE(bad.ok());

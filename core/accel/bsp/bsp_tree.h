@@ -55,6 +55,8 @@ struct BspNode {
   uint32_t count() const { return bits >> 4; }
 
   // What SplitTreeView::validate() asks of a node type.
+  static constexpr uint32_t kChildCount = 2;
+  uint32_t child(uint32_t index, uint32_t k) const { return k == 0 ? index + 1 : above_child(); }
   static constexpr const char* kTreeName = "bsp tree";
   static constexpr uint32_t kMaxDepth = kMaxBspDepth;
   Status check_inner(uint32_t index) const {

@@ -1,5 +1,6 @@
 // SplitTree<Node> / SplitTreeView<Node>: the layout the split-plane trees
-// share (the kd-tree, kd_tree.h, and the restricted BSP, bsp/bsp_tree.h):
+// share (the kd-tree, kd_tree.h, the restricted BSP, bsp/bsp_tree.h, and
+// the octree, octree/octree.h):
 // the bounds of every triangle, 8-byte nodes (nodes[0] the root; an inner
 // node's child below its plane is the next node), leaves as runs of triangle
 // references (a triangle crossing planes is referenced by every leaf it
@@ -14,8 +15,10 @@
 // within the references, and what the node type checks of its own
 // (Node::check_inner: the split finite, the axis or direction known).
 //
-// Node provides: is_leaf(), first(), count(), above_child(), kMaxDepth,
-// kTreeName, and Status check_inner(uint32_t index) const.
+// Node provides: is_leaf(), first(), count(), kChildCount and
+// child(index, k) (an inner node's children, each after it), kMaxDepth,
+// kTreeName, and Status check_inner(uint32_t index) const. The octree
+// (octree/octree.h) shares the layout with eight children a node.
 //
 // Thread-safety: plain values; immutable trees and views may be read from
 // many threads.
@@ -95,14 +98,14 @@ Status SplitTreeView<Node>::validate() const {
       continue;
     }
     OUTCORE_RETURN_IF_ERROR(node.check_inner(index));
-    const uint32_t below = index + 1, above = node.above_child();
-    if (below >= nodes.size() || above <= below || above >= nodes.size()) {
-      return invalid_argument(name + ": node " + std::to_string(index) + " has children " +
-                              std::to_string(below) + " and " + std::to_string(above) + " of " +
-                              std::to_string(nodes.size()));
+    for (uint32_t k = 0; k < Node::kChildCount; ++k) {
+      const uint32_t child = node.child(index, k);
+      if (child <= index || child >= nodes.size()) {
+        return invalid_argument(name + ": node " + std::to_string(index) + " has child " +
+                                std::to_string(child) + " of " + std::to_string(nodes.size()));
+      }
+      pending.emplace_back(child, depth + 1);
     }
-    pending.emplace_back(below, depth + 1);
-    pending.emplace_back(above, depth + 1);
   }
   return Status::Ok();
 }

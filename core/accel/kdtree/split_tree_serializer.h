@@ -35,8 +35,10 @@
 #include <vector>
 
 #include "core/accel/brick_serializer.h"
+#include "core/accel/bvh/bvh_tree.h"
 #include "core/accel/bvh/triangle_test_kind.h"
 #include "core/accel/payload_io.h"
+#include "core/geometry/triangle.h"
 
 namespace outcore {
 

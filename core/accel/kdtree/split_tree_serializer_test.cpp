@@ -1,5 +1,5 @@
-// The split-plane trees' serialisers (KdTreeBrickSerializer,
-// BspBrickSerializer; split_tree_serializer.h), each: a saved and reloaded
+// The serialisers of the split-plane trees' payload (KdTreeBrickSerializer,
+// BspBrickSerializer, OctreeBrickSerializer; split_tree_serializer.h), each: a saved and reloaded
 // brick answers bitwise as the built one (every triangle test, models and generator scenes, degenerate
 // triangles), reports the same memory and triangle count; truncated, padded,
 // inflated and randomly corrupted payloads are errors or, where the damage
@@ -7,6 +7,7 @@
 // exactly when the config does.
 #include "core/accel/bsp/bsp_brick_serializer.h"
 #include "core/accel/kdtree/kd_tree_brick_serializer.h"
+#include "core/accel/octree/octree_brick_serializer.h"
 
 #include <gtest/gtest.h>
 
@@ -29,6 +30,17 @@ using accel_test::load_brick_from;
 
 constexpr std::size_t kRays = 1500;
 
+// Configs that each differ from the default in one builder field.
+template <class Config>
+std::vector<Config> cost_variants() {
+  std::vector<Config> out(4);
+  out[0].builder.traversal_cost = std::nextafter(1.0f, 2.0f);  // the smallest change still differs
+  out[1].builder.intersection_cost = 40.0f;
+  out[2].builder.empty_bonus = 0.25f;
+  out[3].builder.max_depth = 20;
+  return out;
+}
+
 struct KdTreeKind {
   using Config = KdTreeBrickConfig;
   using Accel = KdTreeBrickAccel;
@@ -36,6 +48,7 @@ struct KdTreeKind {
   using Node = KdNode;
   static constexpr const char* kName = "kdtree";
   static Node cycle() { return KdNode::inner(0, 0.0f, 0); }
+  static std::vector<Config> variants() { return cost_variants<Config>(); }
 };
 struct BspKind {
   using Config = BspBrickConfig;
@@ -44,6 +57,21 @@ struct BspKind {
   using Node = BspNode;
   static constexpr const char* kName = "bsp";
   static Node cycle() { return BspNode::inner(0, 0.0f, 0); }
+  static std::vector<Config> variants() { return cost_variants<Config>(); }
+};
+struct OctreeKind {
+  using Config = OctreeBrickConfig;
+  using Accel = OctreeBrickAccel;
+  using Serializer = OctreeBrickSerializer;
+  using Node = OctreeNode;
+  static constexpr const char* kName = "octree";
+  static Node cycle() { return OctreeNode::inner(0); }
+  static std::vector<Config> variants() {
+    std::vector<Config> out(2);
+    out[0].builder.max_leaf_size = 4;
+    out[1].builder.max_depth = 10;
+    return out;
+  }
 };
 
 template <class Kind>
@@ -96,7 +124,7 @@ void expect_same_answers(const BrickAccel& built, const BrickAccel& loaded, cons
 
 template <class Kind>
 class SplitTreeSerializer : public ::testing::Test {};
-using Kinds = ::testing::Types<KdTreeKind, BspKind>;
+using Kinds = ::testing::Types<KdTreeKind, BspKind, OctreeKind>;
 TYPED_TEST_SUITE(SplitTreeSerializer, Kinds);
 
 TYPED_TEST(SplitTreeSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
@@ -234,19 +262,9 @@ TYPED_TEST(SplitTreeSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {
   std::set<std::string> keys;
   for (const TriangleTest test : kAllTriangleTests)
     keys.insert(Serializer(config_of<Kind>(test)).structure_key());
-  typename Kind::Config c = config_of<Kind>(TriangleTest::kWatertight);
-  c.builder.traversal_cost = std::nextafter(1.0f, 2.0f);  // the smallest change still differs
-  keys.insert(Serializer(c).structure_key());
-  c = config_of<Kind>(TriangleTest::kWatertight);
-  c.builder.intersection_cost = 40.0f;
-  keys.insert(Serializer(c).structure_key());
-  c = config_of<Kind>(TriangleTest::kWatertight);
-  c.builder.empty_bonus = 0.25f;
-  keys.insert(Serializer(c).structure_key());
-  c = config_of<Kind>(TriangleTest::kWatertight);
-  c.builder.max_depth = 20;
-  keys.insert(Serializer(c).structure_key());
-  EXPECT_EQ(keys.size(), 7u);
+  const auto variants = Kind::variants();
+  for (const auto& config : variants) keys.insert(Serializer(config).structure_key());
+  EXPECT_EQ(keys.size(), 3 + variants.size());
   EXPECT_EQ(Serializer(typename Kind::Config{}).structure_key().rfind(std::string(Kind::kName) + "/", 0), 0u);
 }
 
