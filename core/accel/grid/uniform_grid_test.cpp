@@ -66,19 +66,9 @@ void expect_every_test_matches(const std::string& what, const UniformGrid& grid,
 }
 
 TEST(UniformGrid, MatchesBruteForceOnGeneratedScenesSoupsAndTheBunny) {
-  for (const char* spec :
-       {"gen:sphere?level=4", "gen:torus?nu=48&nv=24", "gen:terrain?n=24&size=6&height=0.5"}) {
-    const BrickData brick = load_brick_from(spec);
-    expect_every_test_matches(spec, build_grid(brick), mixed_rays(brick, kRays, 21), kRays / 10);
-  }
+  split_tree_test::expect_every_test_matches_on_the_usual_scenes<GridWalks>(
+      [](const BrickData& brick) { return build_grid(brick); }, kRays);
   const BrickData random = accel_test::random_triangles(1500, 4);
-  expect_every_test_matches("random", build_grid(random), mixed_rays(random, kRays, 22), kRays / 10);
-  const BrickData scattered = accel_test::scattered_triangles(3000, 5);
-  expect_every_test_matches("scattered", build_grid(scattered), mixed_rays(scattered, kRays, 23), 1);
-  const BrickData degenerate = accel_test::degenerate_heavy(3000, 6);
-  expect_every_test_matches("degenerate", build_grid(degenerate), mixed_rays(degenerate, kRays, 24), 1);
-  const BrickData bunny = load_brick_from(accel_test::bunny_path());
-  expect_every_test_matches("bunny", build_grid(bunny), mixed_rays(bunny, kRays, 25), kRays / 10);
   UniformGridBuilder::Config pbrt;
   pbrt.rule = UniformGridBuilder::ResolutionRule::kPbrt;
   const BrickData torus = load_brick_from("gen:torus?nu=48&nv=24");

@@ -65,19 +65,8 @@ void expect_every_test_matches(const std::string& what, const SplitTree<Node>& t
 }
 
 TEST(KdTree, MatchesBruteForceOnGeneratedScenesSoupsAndTheBunny) {
-  for (const char* spec :
-       {"gen:sphere?level=4", "gen:torus?nu=48&nv=24", "gen:terrain?n=24&size=6&height=0.5"}) {
-    const BrickData brick = load_brick_from(spec);
-    expect_every_test_matches(spec, build_tree(brick), mixed_rays(brick, kRays, 21), kRays / 10);
-  }
-  const BrickData random = accel_test::random_triangles(1500, 4);
-  expect_every_test_matches("random", build_tree(random), mixed_rays(random, kRays, 22), kRays / 10);
-  const BrickData scattered = accel_test::scattered_triangles(3000, 5);
-  expect_every_test_matches("scattered", build_tree(scattered), mixed_rays(scattered, kRays, 23), 1);
-  const BrickData degenerate = accel_test::degenerate_heavy(3000, 6);
-  expect_every_test_matches("degenerate", build_tree(degenerate), mixed_rays(degenerate, kRays, 24), 1);
-  const BrickData bunny = load_brick_from(accel_test::bunny_path());
-  expect_every_test_matches("bunny", build_tree(bunny), mixed_rays(bunny, kRays, 25), kRays / 10);
+  split_tree_test::expect_every_test_matches_on_the_usual_scenes<KdWalks>(
+      [](const BrickData& brick) { return build_tree(brick); }, kRays);
 }
 
 TEST(KdTree, AimedAtVerticesAndEdgesOfAClosedMeshItLeaksNothingAtAnyOffset) {

@@ -113,6 +113,27 @@ inline std::vector<Ray> mixed_rays(const BrickData& brick, std::size_t n, uint64
   return rays;
 }
 
+// Every triangle test, bitwise against brute force, on the scenes every
+// structure's test runs: three generated meshes, random, scattered and
+// degenerate-heavy soups, and the bunny; build(brick) makes the structure,
+// `rays` rays a scene.
+template <class Walks, class Build>
+void expect_every_test_matches_on_the_usual_scenes(Build&& build, std::size_t rays) {
+  for (const char* spec :
+       {"gen:sphere?level=4", "gen:torus?nu=48&nv=24", "gen:terrain?n=24&size=6&height=0.5"}) {
+    const BrickData brick = accel_test::load_brick_from(spec);
+    expect_every_test_matches<Walks>(spec, build(brick), mixed_rays(brick, rays, 21), rays / 10);
+  }
+  const BrickData random = accel_test::random_triangles(1500, 4);
+  expect_every_test_matches<Walks>("random", build(random), mixed_rays(random, rays, 22), rays / 10);
+  const BrickData scattered = accel_test::scattered_triangles(3000, 5);
+  expect_every_test_matches<Walks>("scattered", build(scattered), mixed_rays(scattered, rays, 23), 1);
+  const BrickData degenerate = accel_test::degenerate_heavy(3000, 6);
+  expect_every_test_matches<Walks>("degenerate", build(degenerate), mixed_rays(degenerate, rays, 24), 1);
+  const BrickData bunny = accel_test::load_brick_from(accel_test::bunny_path());
+  expect_every_test_matches<Walks>("bunny", build(bunny), mixed_rays(bunny, rays, 25), rays / 10);
+}
+
 // A closed icosphere (level 3) moved to `offset` and scaled with it, and rays
 // from an interior point aimed exactly at every vertex and edge midpoint
 // (direction = target - origin in float): a watertight walk leaks none.
