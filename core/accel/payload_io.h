@@ -40,6 +40,22 @@ void read_array(std::vector<T>& out, uint64_t count, std::span<const char> bytes
   if (!out.empty()) std::memcpy(out.data(), bytes.data() + offset, out.size() * sizeof(T));
 }
 
+// The checks a payload starting with the triangle test byte begins with:
+// INVALID_ARGUMENT "<what>: truncated ..." when it is shorter than its
+// header, "<what>: triangle test ..." when the byte is not `test`.
+inline Status check_header(std::span<const char> bytes, uint64_t header_bytes, TriangleTest test,
+                           const std::string& what) {
+  if (bytes.size() < header_bytes) {
+    return invalid_argument(what + ": truncated (" + std::to_string(bytes.size()) + " bytes, no header)");
+  }
+  const uint8_t written = static_cast<uint8_t>(bytes[0]);
+  if (written != static_cast<uint8_t>(test)) {
+    return invalid_argument(what + ": triangle test " + std::to_string(written) + ", expected " +
+                            std::string(triangle_test_name(test)));
+  }
+  return Status::Ok();
+}
+
 // `accel` as the serialiser's Accel type built with `test`, or
 // INVALID_ARGUMENT naming what differs (`name`: "<structure> serialiser").
 template <class Accel>

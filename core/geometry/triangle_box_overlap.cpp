@@ -22,6 +22,15 @@ bool separates(const Vec3d& axis, const Vec3d& a, const Vec3d& b, const Vec3d& c
 
 }  // namespace
 
+double cell_filing_margin(const Aabb& region, const Vec3d& cell_size) {
+  double margin = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double magnitude = std::max(std::abs(double{region.lo[a]}), std::abs(double{region.hi[a]}));
+    margin = std::max(margin, 0x1p-20 * (cell_size[a] + magnitude));
+  }
+  return margin;
+}
+
 bool triangle_may_touch_box(const Triangle& triangle, const Vec3d& lo, const Vec3d& hi, double margin) {
   const Vec3d center = (lo + hi) * 0.5;
   const Vec3d h = (hi - lo) * 0.5 + Vec3d(margin, margin, margin);

@@ -10,6 +10,7 @@
 // Thread-safety: a pure function.
 #pragma once
 
+#include "core/geometry/aabb.h"
 #include "core/geometry/triangle.h"
 #include "core/geometry/vec3.h"
 
@@ -17,5 +18,12 @@ namespace outcore {
 
 // Box [lo, hi] (float64), grown by margin >= 0 on every side.
 bool triangle_may_touch_box(const Triangle& triangle, const Vec3d& lo, const Vec3d& hi, double margin);
+
+// The margin a structure grows its cells by when it files triangles into
+// cells of `cell_size` within `region` (the grid's, an octree node's
+// children): 2^-20 of the cell size plus the coordinates' magnitude, far
+// above float64 rounding and far below a cell, so the test stays
+// conservative without filing triangles into distant cells.
+double cell_filing_margin(const Aabb& region, const Vec3d& cell_size);
 
 }  // namespace outcore

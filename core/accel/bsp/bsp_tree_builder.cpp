@@ -10,6 +10,7 @@
 
 #include "core/accel/bsp/bsp_directions.h"
 #include "core/accel/bsp/bsp_polytope.h"
+#include "core/accel/triangle_hit_records.h"
 
 namespace outcore {
 namespace {
@@ -405,10 +406,7 @@ BspTreeBuilder::Result BspTreeBuilder::build(std::vector<Triangle> triangles,
   Result result;
   BspTree& tree = result.tree;
   if (triangles.empty()) return result;
-  tree.records.reserve(triangles.size());
-  for (std::size_t k = 0; k < triangles.size(); ++k) {
-    tree.records.push_back({triangles[k].unit_normal(), ids[k].geometry_id, ids[k].primitive_id});
-  }
+  tree.records = hit_records_for(triangles, ids);
   tree.triangles = std::move(triangles);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run();

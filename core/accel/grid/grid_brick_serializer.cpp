@@ -66,14 +66,7 @@ Expected<std::unique_ptr<BrickAccel>> GridBrickSerializer::load(const Serialized
                                                                 uint32_t triangle_count) const {
   const std::string what = "grid serialiser: brick " + std::to_string(brick_id);
   const std::span<const char> bytes = payload.bytes;
-  if (bytes.size() < kHeaderBytes) {
-    return invalid_argument(what + ": truncated (" + std::to_string(bytes.size()) + " bytes, no header)");
-  }
-  const uint8_t test = static_cast<uint8_t>(bytes[0]);
-  if (test != static_cast<uint8_t>(test_)) {
-    return invalid_argument(what + ": triangle test " + std::to_string(test) + ", expected " +
-                            std::string(triangle_test_name(test_)));
-  }
+  OUTCORE_RETURN_IF_ERROR(payload_io::check_header(bytes, kHeaderBytes, test_, what));
   uint64_t counts[3];
   std::memcpy(counts, bytes.data() + kCountsOffset, sizeof(counts));
   UniformGrid grid;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <utility>
 
+#include "core/accel/triangle_hit_records.h"
 #include "core/geometry/triangle_box_overlap.h"
 #include "core/util/parse_number.h"
 
@@ -85,15 +86,7 @@ struct CellPair {
 bool file_triangles(const UniformGridView& grid, std::span<const Triangle> triangles, uint64_t cap,
                     std::vector<CellPair>& pairs) {
   pairs.clear();
-  // A margin far above float64 rounding and far below a cell: the overlap
-  // test stays conservative without filing triangles into distant cells.
-  Vec3d margin;
-  for (int a = 0; a < 3; ++a) {
-    const double magnitude =
-        std::max(std::abs(double{grid.bounds.lo[a]}), std::abs(double{grid.bounds.hi[a]}));
-    margin[a] = 0x1p-20 * (double{grid.cell_width[a]} + magnitude);
-  }
-  const double box_margin = std::max({margin.x, margin.y, margin.z});
+  const double box_margin = cell_filing_margin(grid.bounds, Vec3d(grid.cell_width));
   const uint32_t rx = grid.resolution[0], ry = grid.resolution[1];
   auto cell_lo = [&](int a, uint32_t j) { return j == 0 ? grid.bounds.lo[a] : grid.boundary(a, j); };
   auto cell_hi = [&](int a, uint32_t j) {
@@ -203,10 +196,7 @@ UniformGridBuilder::Result UniformGridBuilder::build(std::vector<Triangle> trian
   if (triangles.empty()) return result;
   const uint64_t n = triangles.size();
   for (const Triangle& tri : triangles) grid.bounds.extend(tri.bounds());
-  grid.records.reserve(n);
-  for (std::size_t k = 0; k < n; ++k) {
-    grid.records.push_back({triangles[k].unit_normal(), ids[k].geometry_id, ids[k].primitive_id});
-  }
+  grid.records = hit_records_for(triangles, ids);
   grid.triangles = std::move(triangles);
 
   std::vector<CellPair> pairs;

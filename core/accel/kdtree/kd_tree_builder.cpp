@@ -9,6 +9,8 @@
 #include <string>
 #include <utility>
 
+#include "core/accel/triangle_hit_records.h"
+
 namespace outcore {
 namespace {
 
@@ -385,10 +387,7 @@ KdTreeBuilder::Result KdTreeBuilder::build(std::vector<Triangle> triangles,
   KdTree& tree = result.tree;
   if (triangles.empty()) return result;
   for (const Triangle& tri : triangles) tree.bounds.extend(tri.bounds());
-  tree.records.reserve(triangles.size());
-  for (std::size_t k = 0; k < triangles.size(); ++k) {
-    tree.records.push_back({triangles[k].unit_normal(), ids[k].geometry_id, ids[k].primitive_id});
-  }
+  tree.records = hit_records_for(triangles, ids);
   tree.triangles = std::move(triangles);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run(tree.bounds);

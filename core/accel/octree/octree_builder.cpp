@@ -6,6 +6,7 @@
 #include <cmath>
 #include <utility>
 
+#include "core/accel/triangle_hit_records.h"
 #include "core/geometry/triangle_box_overlap.h"
 #include "core/util/parse_number.h"
 
@@ -19,16 +20,6 @@ struct PendingNode {
   uint32_t depth;
   std::vector<uint32_t> triangles;
 };
-
-// A margin far above float64 rounding and far below a cell (as the grid's).
-double margin_for(const Aabb& box) {
-  double margin = 0;
-  for (int a = 0; a < 3; ++a) {
-    const double magnitude = std::max(std::abs(double{box.lo[a]}), std::abs(double{box.hi[a]}));
-    margin = std::max(margin, 0x1p-20 * (double{box.hi[a]} - double{box.lo[a]} + magnitude));
-  }
-  return margin;
-}
 
 class Build {
  public:
@@ -96,7 +87,7 @@ class Build {
   std::array<std::vector<uint32_t>, 8> file(const PendingNode& node) const {
     std::array<std::vector<uint32_t>, 8> children;
     const Vec3f middle = octree_middle(node.box);
-    const double margin = margin_for(node.box);
+    const double margin = cell_filing_margin(node.box, Vec3d(node.box.hi) - Vec3d(node.box.lo));
     for (const uint32_t tri : node.triangles) {
       const Aabb& b = bounds_[tri];
       uint32_t low_mask = 0, high_mask = 0;
@@ -180,10 +171,7 @@ OctreeBuilder::Result OctreeBuilder::build(std::vector<Triangle> triangles,
   Octree& tree = result.tree;
   if (triangles.empty()) return result;
   for (const Triangle& tri : triangles) tree.bounds.extend(tri.bounds());
-  tree.records.reserve(triangles.size());
-  for (std::size_t k = 0; k < triangles.size(); ++k) {
-    tree.records.push_back({triangles[k].unit_normal(), ids[k].geometry_id, ids[k].primitive_id});
-  }
+  tree.records = hit_records_for(triangles, ids);
   tree.triangles = std::move(triangles);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run();

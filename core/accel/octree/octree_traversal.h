@@ -99,8 +99,9 @@ inline void traverse(const OctreeView& tree, const Ray& ray, float tmin, float& 
     // The children the segment may touch, nearest start first.
     std::array<std::pair<float, uint32_t>, 8> children;
     uint32_t found = 0;
+    const float node_end = std::min(segment_max, limit);
     for (uint32_t k = 0; k < 8; ++k) {
-      float start = std::max(cell.entry, tmin), end = std::min(segment_max, limit);
+      float start = cell.entry, end = node_end;
       for (int a = 0; a < 3; ++a) {
         const bool upper = (k >> a) & 1u;
         start = std::max(start, upper ? parts[a].upper_start : parts[a].lower_start);
