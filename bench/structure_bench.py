@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Issue 24's benchmark: brick structures and brick bounds, same run.
+"""Issues 24 and 25's benchmark: brick structures and brick bounds, same run.
 
 Structures (--structures, default bvh,kdtree,embree; the first is the base): for each scene, `outcore trace --repeat R` on 1M incoherent and 1M
 camera rays (bench/make_rays.py) with a budget that holds the scene: run 1
@@ -16,12 +16,15 @@ bound. Proxies are off for this part so that the bound alone decides; with
 
 Scenes: the bunny; `tilted`, gen:city of 400 terrain patches tilted 30
 degrees (~0.5 M triangles, thin oblique geometry, the rotated scene of the
-issue); `city`, the trace benchmark's 15 M-triangle city (not in the default
-set: ~10 minutes a structure).
+issue); `stadium`, the teapot in a stadium packed as one brick, and
+`terrain`, a 320 k-triangle height field (issue 25's grids); `city`, the
+trace benchmark's 15 M-triangle city (not in the default set: ~10 minutes a
+structure). The bounds part runs on `tilted` only.
 
 Usage: .venv/bin/python bench/structure_bench.py [--runs 5] [--rays 1000000]
        [--scenes bunny,tilted] [--structures bvh,kdtree,embree] [--outcore build/client/outcore] [--work build/bench-structure]
        [--json rows.json] [--png chart.png]
+The chart needs matplotlib (.venv-bench).
 """
 import argparse
 import json
