@@ -9,6 +9,7 @@
 #include "core/accel/grid/grid_brick.h"
 #include "core/accel/kdtree/kd_tree_brick.h"
 #include "core/accel/octree/octree_brick.h"
+#include "core/accel/quadtree/quadtree_brick.h"
 #include "core/accel/reference_brick.h"
 #include "core/util/parse_number.h"
 
@@ -101,8 +102,9 @@ Expected<std::unique_ptr<BrickBuilder>> make_bvh_builder(const BrickAccelOptions
   return std::unique_ptr<BrickBuilder>(new BvhBrickBuilder(config));
 }
 
-// The options both split-plane trees take: triangle_test and the SAH
-// constants (SplitTreeCosts); false when `key` is none of them.
+// The options of the structures over triangle references (kd-tree, BSP,
+// grid, octree, quadtree): triangle_test and their builder's own
+// (Builder::Config::parse_option); false when `key` is none of them.
 template <class Config>
 Expected<bool> parse_split_tree_option(std::string_view structure, const std::string& key,
                                        const std::string& value, Config& config) {
@@ -113,20 +115,28 @@ Expected<bool> parse_split_tree_option(std::string_view structure, const std::st
   return config.builder.parse_option(structure, key, value);
 }
 
-// Defaults: watertight (as the bvh) and SplitTreeCosts' constants.
-Expected<std::unique_ptr<BrickBuilder>> make_kdtree_builder(const BrickAccelOptions& options) {
-  KdTreeBrickConfig config;
+// The structures whose options are triangle_test and their builder's own
+// (Builder::Config::parse_option), listed in `known` for the error.
+template <class BrickBuilderType>
+Expected<std::unique_ptr<BrickBuilder>> make_indexed_builder(const char* name, const char* known,
+                                                             const BrickAccelOptions& options) {
+  typename BrickBuilderType::Config config;
   for (const auto& [key, value] : options) {
-    OUTCORE_ASSIGN_OR_RETURN(const bool known, parse_split_tree_option("kdtree", key, value, config));
-    if (!known) {
-      return invalid_argument("brick accel kdtree: unknown option '" + key +
-                              "' (known: triangle_test, traversal_cost, intersection_cost, empty_bonus, "
-                              "max_depth)");
+    OUTCORE_ASSIGN_OR_RETURN(const bool parsed, parse_split_tree_option(name, key, value, config));
+    if (!parsed) {
+      return invalid_argument(std::string("brick accel ") + name + ": unknown option '" + key +
+                              "' (known: triangle_test, " + known + ")");
     }
   }
   const Status valid = config.builder.validate();
   if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
-  return std::unique_ptr<BrickBuilder>(new KdTreeBrickBuilder(config));
+  return std::unique_ptr<BrickBuilder>(new BrickBuilderType(config));
+}
+
+// Defaults: watertight (as the bvh) and SplitTreeCosts' constants.
+Expected<std::unique_ptr<BrickBuilder>> make_kdtree_builder(const BrickAccelOptions& options) {
+  return make_indexed_builder<KdTreeBrickBuilder>(
+      "kdtree", "traversal_cost, intersection_cost, empty_bonus, max_depth", options);
 }
 
 // Defaults: watertight and BspTreeBuilder::Config's (the kd-tree's costs,
@@ -154,41 +164,19 @@ Expected<std::unique_ptr<BrickBuilder>> make_bsp_builder(const BrickAccelOptions
 // Defaults: watertight and UniformGridBuilder::Config's (the density rule,
 // cells_per_triangle chosen by measurement: docs/BENCHMARKS.md).
 Expected<std::unique_ptr<BrickBuilder>> make_grid_builder(const BrickAccelOptions& options) {
-  GridBrickConfig config;
-  for (const auto& [key, value] : options) {
-    if (key == "triangle_test") {
-      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("grid", value, config.triangle_test));
-      continue;
-    }
-    OUTCORE_ASSIGN_OR_RETURN(const bool known, config.builder.parse_option("grid", key, value));
-    if (!known) {
-      return invalid_argument("brick accel grid: unknown option '" + key +
-                              "' (known: triangle_test, resolution, cells_per_triangle, max_resolution)");
-    }
-  }
-  const Status valid = config.builder.validate();
-  if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
-  return std::unique_ptr<BrickBuilder>(new GridBrickBuilder(config));
+  return make_indexed_builder<GridBrickBuilder>("grid", "resolution, cells_per_triangle, max_resolution",
+                                                options);
 }
 
 // Defaults: watertight and OctreeBuilder::Config's (leaves of up to 8
-// triangles, depth 16).
+// triangles, automatic depth).
 Expected<std::unique_ptr<BrickBuilder>> make_octree_builder(const BrickAccelOptions& options) {
-  OctreeBrickConfig config;
-  for (const auto& [key, value] : options) {
-    if (key == "triangle_test") {
-      OUTCORE_RETURN_IF_ERROR(parse_triangle_test("octree", value, config.triangle_test));
-      continue;
-    }
-    OUTCORE_ASSIGN_OR_RETURN(const bool known, config.builder.parse_option("octree", key, value));
-    if (!known) {
-      return invalid_argument("brick accel octree: unknown option '" + key +
-                              "' (known: triangle_test, max_leaf_size, max_depth)");
-    }
-  }
-  const Status valid = config.builder.validate();
-  if (!valid.ok()) return invalid_argument("brick accel " + valid.message());
-  return std::unique_ptr<BrickBuilder>(new OctreeBrickBuilder(config));
+  return make_indexed_builder<OctreeBrickBuilder>("octree", "max_leaf_size, max_depth", options);
+}
+
+// Defaults: watertight and QuadtreeBuilder::Config's (as the octree's).
+Expected<std::unique_ptr<BrickBuilder>> make_quadtree_builder(const BrickAccelOptions& options) {
+  return make_indexed_builder<QuadtreeBrickBuilder>("quadtree", "max_leaf_size, max_depth", options);
 }
 
 Expected<std::unique_ptr<BrickBuilder>> make_reference_builder(const BrickAccelOptions& options) {
@@ -206,10 +194,10 @@ struct BrickStructureEntry {
   Expected<std::unique_ptr<BrickBuilder>> (*make)(const BrickAccelOptions& options);
 };
 constexpr BrickStructureEntry kBrickStructures[] = {
-    {"embree", make_embree_builder},       {"bvh", make_bvh_builder},
-    {"kdtree", make_kdtree_builder},       {"bsp", make_bsp_builder},
-    {"grid", make_grid_builder},           {"octree", make_octree_builder},
-    {"reference", make_reference_builder},
+    {"embree", make_embree_builder},     {"bvh", make_bvh_builder},
+    {"kdtree", make_kdtree_builder},     {"bsp", make_bsp_builder},
+    {"grid", make_grid_builder},         {"octree", make_octree_builder},
+    {"quadtree", make_quadtree_builder}, {"reference", make_reference_builder},
 };
 
 }  // namespace

@@ -1,5 +1,5 @@
 // Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "grid", "octree",
-// "reference") with options
+// "quadtree", "reference") with options
 // given as key=value strings; unknown names and unknown or malformed options
 // are errors, never ignored. The returned BrickBuilder turns a loaded brick into
 // a BrickAccel.
@@ -68,7 +68,8 @@ inline constexpr const char* kDefaultBrickAccel = "bvh";
 // triangle_test as bvh; resolution=density|pbrt, cells_per_triangle,
 // max_resolution: UniformGridBuilder::Config); "octree" (options:
 // triangle_test as bvh; max_leaf_size, max_depth: OctreeBuilder::Config);
-// "reference" (no options:
+// "quadtree" (options as octree: QuadtreeBuilder::Config); "reference" (no
+// options:
 // float64 brute force per brick, reference_brick.h).
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options);

@@ -485,10 +485,16 @@ UnlimitedRun run_unlimited(const std::string& store, const EngineOptions& option
 // Every structure with a serialiser, with every triangle test for the bvh
 // and one or two for the split-plane trees and the grid (their serialisers
 // write the test as a byte, as the bvh's does).
-constexpr std::pair<const char*, const char*> kTierStructuresAndTests[] = {
-    {"bvh", "mt"},           {"bvh", "watertight"}, {"bvh", "double"},      {"kdtree", "watertight"},
-    {"kdtree", "mt"},        {"bsp", "watertight"}, {"grid", "watertight"}, {"grid", "double"},
-    {"octree", "watertight"}};
+constexpr std::pair<const char*, const char*> kTierStructuresAndTests[] = {{"bvh", "mt"},
+                                                                           {"bvh", "watertight"},
+                                                                           {"bvh", "double"},
+                                                                           {"kdtree", "watertight"},
+                                                                           {"kdtree", "mt"},
+                                                                           {"bsp", "watertight"},
+                                                                           {"grid", "watertight"},
+                                                                           {"grid", "double"},
+                                                                           {"octree", "watertight"},
+                                                                           {"quadtree", "watertight"}};
 
 TEST(SubtreeTierEngine, TinyBudgetWithTheTierAnswersLikeAnUnlimitedBudget) {
   const auto scene = testing::pack_test_scene(

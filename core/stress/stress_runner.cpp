@@ -53,6 +53,8 @@ const std::vector<StressConfig>& stress_configs() {
       {"grid-double", "grid", {{"triangle_test", "double"}}, true},
       {"octree-watertight", "octree", {{"triangle_test", "watertight"}}, true},
       {"octree-double", "octree", {{"triangle_test", "double"}}, true},
+      {"quadtree-watertight", "quadtree", {{"triangle_test", "watertight"}}, true},
+      {"quadtree-double", "quadtree", {{"triangle_test", "double"}}, true},
   };
   return kConfigs;
 }

@@ -167,6 +167,16 @@ TEST(StressSuite, OctreeDoubleNeverLeaksAndAgreesWithTheReference) {
   expect_watertight("octree-double", true);
 }
 
+// The quadtree (issue 25), likewise: conservative at middle lines, where
+// four columns meet and at the columns' height bounds.
+TEST(StressSuite, QuadtreeWatertightNeverLeaks) {
+  expect_watertight("quadtree-watertight", false);
+}
+
+TEST(StressSuite, QuadtreeDoubleNeverLeaksAndAgreesWithTheReference) {
+  expect_watertight("quadtree-double", true);
+}
+
 // The suite is not vacuous: Möller–Trumbore in float leaks through shared
 // vertices and edges somewhere in it.
 TEST(StressSuite, MollerTrumboreLeaksSomewhere) {

@@ -1,7 +1,7 @@
 // SplitTree<Node> / SplitTreeView<Node>: the layout the split-plane trees
 // share (the kd-tree, kd_tree.h, the restricted BSP, bsp/bsp_tree.h, and
 // the octree, octree/octree.h):
-// the bounds of every triangle, 8-byte nodes (nodes[0] the root; an inner
+// the bounds of every triangle, nodes (8 bytes; the quadtree's 16) (nodes[0] the root; an inner
 // node's child below its plane is the next node), leaves as runs of triangle
 // references (a triangle crossing planes is referenced by every leaf it
 // reaches), and per triangle what a hit reports besides t, u, v. The tree
@@ -17,8 +17,10 @@
 //
 // Node provides: is_leaf(), first(), count(), kChildCount and
 // child(index, k) (an inner node's children, each after it), kMaxDepth,
-// kTreeName, and Status check_inner(uint32_t index) const. The octree
-// (octree/octree.h) shares the layout with eight children a node.
+// kTreeName, and Status check_inner(uint32_t index) const (inner nodes), and
+// optionally Status check(uint32_t index) const (every node). The octree
+// (octree/octree.h) shares the layout with eight children a node, the
+// quadtree (quadtree/quadtree.h) with four and 16-byte nodes.
 //
 // Thread-safety: plain values; immutable trees and views may be read from
 // many threads.
@@ -90,6 +92,7 @@ Status SplitTreeView<Node>::validate() const {
                               std::to_string(index));
     }
     const Node& node = nodes[index];
+    if constexpr (requires { node.check(index); }) OUTCORE_RETURN_IF_ERROR(node.check(index));
     if (node.is_leaf()) {
       if (uint64_t{node.first()} + node.count() > refs.size()) {
         return invalid_argument(name + ": leaf " + std::to_string(index) + " reaches past the " +

@@ -10,7 +10,7 @@
 // left out. Each tree's serialiser (split_tree_serializer.h) keeps its bricks
 // in the subtree tier.
 //
-// Memory: memory_bytes() = the tree's arrays (8 B per node, 4 B per
+// Memory: memory_bytes() = the tree's arrays (8 B per node, 16 for the quadtree, 4 B per
 // reference, 56 B per triangle) + kOverheadBytes; reserve_bytes(n) bounds it
 // and the build's peak (each builder caps references per triangle).
 //

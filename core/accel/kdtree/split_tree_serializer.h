@@ -1,11 +1,12 @@
 // SplitTreeSerializer: the subtree tier's payload for the split-plane trees
-// (the kd-tree and the BSP, which share their layout: bounds, 8-byte nodes,
+// (the kd-tree, the BSP, the octree and the quadtree, which share their
+// layout: bounds, nodes (8 bytes; the quadtree's 16),
 // references, triangles, hit records), version 1:
 //
 //   offset 0   triangle test (uint8), 7 zero bytes
 //   offset 8   node, reference and triangle counts (uint64 each)
 //   offset 32  the tree's bounds (6 floats: lo xyz, hi xyz), 8 zero bytes
-//   offset 64  the nodes (8 B each), the references (4 B), the triangles
+//   offset 64  the nodes (sizeof(Node) each), the references (4 B), the triangles
 //              (36 B), the hit records (20 B, one per triangle); nothing after
 //
 // written with cereal's binary archive (little-endian, as the store). load()

@@ -1,5 +1,6 @@
 // The serialisers of the split-plane trees' payload (KdTreeBrickSerializer,
-// BspBrickSerializer, OctreeBrickSerializer; split_tree_serializer.h), each: a saved and reloaded
+// BspBrickSerializer, OctreeBrickSerializer, QuadtreeBrickSerializer;
+// split_tree_serializer.h), each: a saved and reloaded
 // brick answers bitwise as the built one (every triangle test, models and generator scenes, degenerate
 // triangles), reports the same memory and triangle count; truncated, padded,
 // inflated and randomly corrupted payloads are errors or, where the damage
@@ -8,6 +9,7 @@
 #include "core/accel/bsp/bsp_brick_serializer.h"
 #include "core/accel/kdtree/kd_tree_brick_serializer.h"
 #include "core/accel/octree/octree_brick_serializer.h"
+#include "core/accel/quadtree/quadtree_brick_serializer.h"
 
 #include <gtest/gtest.h>
 
@@ -66,12 +68,23 @@ struct OctreeKind {
   using Node = OctreeNode;
   static constexpr const char* kName = "octree";
   static Node cycle() { return OctreeNode::inner(0); }
-  static std::vector<Config> variants() {
-    std::vector<Config> out(2);
+  template <class Variant = Config>
+  static std::vector<Variant> variants() {
+    std::vector<Variant> out(2);
     out[0].builder.max_leaf_size = 4;
     out[1].builder.max_depth = 10;
     return out;
   }
+};
+
+struct QuadtreeKind {
+  using Config = QuadtreeBrickConfig;
+  using Accel = QuadtreeBrickAccel;
+  using Serializer = QuadtreeBrickSerializer;
+  using Node = QuadtreeNode;
+  static constexpr const char* kName = "quadtree";
+  static Node cycle() { return QuadtreeNode::inner(0, 0.0f, 0.0f); }
+  static std::vector<Config> variants() { return OctreeKind::variants<Config>(); }
 };
 
 template <class Kind>
@@ -124,7 +137,7 @@ void expect_same_answers(const BrickAccel& built, const BrickAccel& loaded, cons
 
 template <class Kind>
 class SplitTreeSerializer : public ::testing::Test {};
-using Kinds = ::testing::Types<KdTreeKind, BspKind, OctreeKind>;
+using Kinds = ::testing::Types<KdTreeKind, BspKind, OctreeKind, QuadtreeKind>;
 TYPED_TEST_SUITE(SplitTreeSerializer, Kinds);
 
 TYPED_TEST(SplitTreeSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
