@@ -7,6 +7,7 @@
 #include "core/accel/bvh/bvh_brick.h"
 #include "core/accel/embree_brick.h"
 #include "core/accel/grid/grid_brick.h"
+#include "core/accel/hgrid/hgrid_brick.h"
 #include "core/accel/kdtree/kd_tree_brick.h"
 #include "core/accel/octree/octree_brick.h"
 #include "core/accel/quadtree/quadtree_brick.h"
@@ -103,7 +104,7 @@ Expected<std::unique_ptr<BrickBuilder>> make_bvh_builder(const BrickAccelOptions
 }
 
 // The options of the structures over triangle references (kd-tree, BSP,
-// grid, octree, quadtree): triangle_test and their builder's own
+// grid, hgrid, octree, quadtree): triangle_test and their builder's own
 // (Builder::Config::parse_option); false when `key` is none of them.
 template <class Config>
 Expected<bool> parse_split_tree_option(std::string_view structure, const std::string& key,
@@ -168,6 +169,14 @@ Expected<std::unique_ptr<BrickBuilder>> make_grid_builder(const BrickAccelOption
                                                 options);
 }
 
+// Defaults: watertight and HierarchicalGridBuilder::Config's (a root cell
+// per 16 triangles, the uniform grid's lambda in nested grids, nested in
+// cells of more than 8 triangles, 3 levels).
+Expected<std::unique_ptr<BrickBuilder>> make_hgrid_builder(const BrickAccelOptions& options) {
+  return make_indexed_builder<HgridBrickBuilder>(
+      "hgrid", "top_cells_per_triangle, cells_per_triangle, max_cell_triangles, max_levels", options);
+}
+
 // Defaults: watertight and OctreeBuilder::Config's (leaves of up to 8
 // triangles, automatic depth).
 Expected<std::unique_ptr<BrickBuilder>> make_octree_builder(const BrickAccelOptions& options) {
@@ -194,10 +203,11 @@ struct BrickStructureEntry {
   Expected<std::unique_ptr<BrickBuilder>> (*make)(const BrickAccelOptions& options);
 };
 constexpr BrickStructureEntry kBrickStructures[] = {
-    {"embree", make_embree_builder},     {"bvh", make_bvh_builder},
-    {"kdtree", make_kdtree_builder},     {"bsp", make_bsp_builder},
-    {"grid", make_grid_builder},         {"octree", make_octree_builder},
-    {"quadtree", make_quadtree_builder}, {"reference", make_reference_builder},
+    {"embree", make_embree_builder},       {"bvh", make_bvh_builder},
+    {"kdtree", make_kdtree_builder},       {"bsp", make_bsp_builder},
+    {"grid", make_grid_builder},           {"hgrid", make_hgrid_builder},
+    {"octree", make_octree_builder},       {"quadtree", make_quadtree_builder},
+    {"reference", make_reference_builder},
 };
 
 }  // namespace

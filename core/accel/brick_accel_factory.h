@@ -1,5 +1,5 @@
-// Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "grid", "octree",
-// "quadtree", "reference") with options
+// Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "grid", "hgrid",
+// "octree", "quadtree", "reference") with options
 // given as key=value strings; unknown names and unknown or malformed options
 // are errors, never ignored. The returned BrickBuilder turns a loaded brick into
 // a BrickAccel.
@@ -66,7 +66,9 @@ inline constexpr const char* kDefaultBrickAccel = "bvh";
 // empty_bonus, max_depth: KdTreeBuilder::Config); "bsp" (options as kdtree,
 // and directions=3|7|13: BspTreeBuilder::Config); "grid" (options:
 // triangle_test as bvh; resolution=density|pbrt, cells_per_triangle,
-// max_resolution: UniformGridBuilder::Config); "octree" (options:
+// max_resolution: UniformGridBuilder::Config); "hgrid" (options:
+// triangle_test as bvh; top_cells_per_triangle, cells_per_triangle,
+// max_cell_triangles, max_levels: HierarchicalGridBuilder::Config); "octree" (options:
 // triangle_test as bvh; max_leaf_size, max_depth: OctreeBuilder::Config);
 // "quadtree" (options as octree: QuadtreeBuilder::Config); "reference" (no
 // options:

@@ -1,4 +1,4 @@
-// Engine-level tests of our brick structures ("bvh", "kdtree", "bsp", "grid", "octree", "quadtree") and the
+// Engine-level tests of our brick structures ("bvh", "kdtree", "bsp", "grid", "hgrid", "octree", "quadtree") and the
 // "reference" one: a packed store traced through QueryEngine with each
 // structure and every triangle test answers as the float64 brute force does,
 // bitwise the same with one big brick or many tiny ones, under a budget of
@@ -97,7 +97,7 @@ bool bitwise_equal(const std::vector<Hit>& a, const std::vector<Hit>& b) {
 }
 
 // Our structures with a triangle test option, each traced in every test.
-constexpr const char* kStructures[] = {"bvh", "kdtree", "bsp", "grid", "octree", "quadtree"};
+constexpr const char* kStructures[] = {"bvh", "kdtree", "bsp", "grid", "hgrid", "octree", "quadtree"};
 
 TEST(BrickStructureEngine, EveryTriangleTestMatchesTheReferenceAndBrickSizeDoesNotMatter) {
   const std::vector<std::string> inputs = {"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5",

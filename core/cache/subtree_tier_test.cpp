@@ -494,7 +494,7 @@ constexpr std::pair<const char*, const char*> kTierStructuresAndTests[] = {{"bvh
                                                                            {"grid", "watertight"},
                                                                            {"grid", "double"},
                                                                            {"octree", "watertight"},
-                                                                           {"quadtree", "watertight"}};
+                                                                           {"quadtree", "watertight"}, {"hgrid", "watertight"}};
 
 TEST(SubtreeTierEngine, TinyBudgetWithTheTierAnswersLikeAnUnlimitedBudget) {
   const auto scene = testing::pack_test_scene(

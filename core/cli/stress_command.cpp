@@ -122,6 +122,7 @@ void add_stress_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--config", args->config,
                   "all, embree, embree-robust, bvh-mt, bvh-watertight, bvh-double, kdtree-watertight, "
                   "kdtree-double, bsp-watertight, bsp-double, grid-watertight, grid-double, "
+                  "hgrid-watertight, hgrid-double, "
                   "octree-watertight, octree-double, quadtree-watertight or quadtree-double")
       ->capture_default_str();
   cmd->add_flag("--quick", args->quick, "Smaller generated meshes and fewer reference checks");

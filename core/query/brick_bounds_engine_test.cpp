@@ -48,7 +48,7 @@ TEST(BrickBoundsEngine, EveryBoundAnswersBitwiseAsTheBoxesAndTheCountsAddUp) {
   const auto scene = testing::pack_test_scene(
       {"gen:city?of=(gen:terrain?n=10&size=2&height=0.05)&copies=100&spacing=3&tilt=30"}, 200);
   const auto rays = testing::make_test_rays(scene->bounds, 4000, 5);
-  for (const char* accel : {"bvh", "embree", "kdtree", "bsp", "grid", "octree", "quadtree"}) {
+  for (const char* accel : {"bvh", "embree", "kdtree", "bsp", "grid", "hgrid", "octree", "quadtree"}) {
     SCOPED_TRACE(accel);
     for (const bool proxies : {false, true}) {
       const Traced boxes = trace(*scene, rays, accel, "aabb", proxies);

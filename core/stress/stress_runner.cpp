@@ -51,6 +51,8 @@ const std::vector<StressConfig>& stress_configs() {
       {"bsp-double", "bsp", {{"triangle_test", "double"}}, true},
       {"grid-watertight", "grid", {{"triangle_test", "watertight"}}, true},
       {"grid-double", "grid", {{"triangle_test", "double"}}, true},
+      {"hgrid-watertight", "hgrid", {{"triangle_test", "watertight"}}, true},
+      {"hgrid-double", "hgrid", {{"triangle_test", "double"}}, true},
       {"octree-watertight", "octree", {{"triangle_test", "watertight"}}, true},
       {"octree-double", "octree", {{"triangle_test", "double"}}, true},
       {"quadtree-watertight", "quadtree", {{"triangle_test", "watertight"}}, true},

@@ -14,7 +14,8 @@
 // Configurations: embree, embree-robust, bvh-mt, bvh-watertight, bvh-double,
 // and the split-plane trees and the grid with the exact tests:
 // kdtree-watertight, kdtree-double, bsp-watertight, bsp-double,
-// grid-watertight, grid-double, octree-watertight, octree-double,
+// grid-watertight, grid-double, hgrid-watertight, hgrid-double,
+// octree-watertight, octree-double,
 // quadtree-watertight, quadtree-double
 // (bvh-watertight, bvh-double and the
 // structures with exact tests must never leak:

@@ -157,6 +157,16 @@ TEST(StressSuite, GridDoubleNeverLeaksAndAgreesWithTheReference) {
   expect_watertight("grid-double", true);
 }
 
+// The hierarchical grid (issue 25), likewise: both levels' walks are the
+// grid's conservative DDA.
+TEST(StressSuite, HgridWatertightNeverLeaks) {
+  expect_watertight("hgrid-watertight", false);
+}
+
+TEST(StressSuite, HgridDoubleNeverLeaksAndAgreesWithTheReference) {
+  expect_watertight("hgrid-double", true);
+}
+
 // The octree (issue 25), likewise: its walk is conservative at middle planes
 // and where eight cells meet.
 TEST(StressSuite, OctreeWatertightNeverLeaks) {
@@ -191,7 +201,7 @@ TEST(StressSuite, MollerTrumboreLeaksSomewhere) {
 }
 
 TEST(StressSuite, ConfigSelectionRejectsUnknownNames) {
-  EXPECT_EQ(select_stress_configs("all")->size(), 13u);
+  EXPECT_EQ(select_stress_configs("all")->size(), 17u);
   EXPECT_EQ(select_stress_configs("bvh-mt")->front().name, "bvh-mt");
   const auto bad = select_stress_configs("bvh");
   ASSERT_FALSE(bad.ok());

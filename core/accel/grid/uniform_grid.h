@@ -7,10 +7,10 @@
 // per triangle what a hit reports besides t, u, v. Cells are numbered x
 // fastest: c = x + resolution[0] * (y + resolution[1] * z).
 //
-// Cell boundaries are defined by one float expression, boundary(axis, j) =
-// bounds.lo + j * cell_width (j = 1 .. resolution - 1), which the builder and
-// the traversal share; the outermost cells reach the grid's bounds. A
-// triangle is filed under every cell whose closed box it may touch
+// The cells' geometry is a GridLattice (grid_lattice.h: one float
+// expression for the boundaries, which the builder and the traversal
+// share; the outermost cells reach the grid's bounds, those of every
+// triangle). A triangle is filed under every cell whose closed box it may touch
 // (triangle_box_overlap.h), so a point on a boundary is in the cells on both
 // sides.
 //
@@ -26,9 +26,11 @@
 #include <array>
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "core/accel/bvh/bvh_tree.h"
+#include "core/accel/grid/grid_lattice.h"
 #include "core/geometry/aabb.h"
 #include "core/geometry/triangle.h"
 #include "core/util/status.h"
@@ -40,44 +42,35 @@ namespace outcore {
 inline constexpr uint32_t kMaxGridResolution = 4096;
 inline constexpr uint64_t kMaxGridCells = uint64_t{1} << 28;
 
-struct UniformGridView {
-  Aabb bounds;  // of every triangle; traversal clips rays to it
-  std::array<uint32_t, 3> resolution{0, 0, 0};
-  Vec3f cell_width;                       // (bounds.hi - bounds.lo) / resolution, in float
+struct UniformGridView : GridLattice {
   std::span<const uint32_t> cell_starts;  // cell_count() + 1 offsets into refs; empty without triangles
   std::span<const uint32_t> refs;
   std::span<const Triangle> triangles;
   std::span<const BvhHitRecord> records;  // records[k] belongs to triangles[k]
 
-  uint64_t cell_count() const { return uint64_t{resolution[0]} * resolution[1] * resolution[2]; }
-  // The plane between cells j - 1 and j along axis (1 <= j < resolution).
-  float boundary(int axis, uint32_t j) const {
-    return bounds.lo[axis] + static_cast<float>(j) * cell_width[axis];
-  }
-  // The lowest and highest cell along axis whose closed extent holds x
-  // (x inside the bounds; outside, the nearest end cell).
-  uint32_t lowest_cell_holding(int axis, float x) const;
-  uint32_t highest_cell_holding(int axis, float x) const;
-
   Status validate() const;
 };
 
-struct UniformGrid {
-  Aabb bounds;
-  std::array<uint32_t, 3> resolution{0, 0, 0};
-  Vec3f cell_width;
+struct UniformGrid : GridLattice {
   std::vector<uint32_t> cell_starts;
   std::vector<uint32_t> refs;
   std::vector<Triangle> triangles;
   std::vector<BvhHitRecord> records;
 
-  UniformGridView view() const {
-    return {bounds, resolution, cell_width, cell_starts, refs, triangles, records};
-  }
+  UniformGridView view() const { return {{*this}, cell_starts, refs, triangles, records}; }
   uint64_t memory_bytes() const {
     return cell_starts.capacity() * sizeof(uint32_t) + refs.capacity() * sizeof(uint32_t) +
            triangles.capacity() * sizeof(Triangle) + records.capacity() * sizeof(BvhHitRecord);
   }
 };
+
+// What a grid's validate() checks of its arrays (the hierarchical grid's
+// too): records match triangles and references name triangles; cell starts
+// (non-empty) run from 0 to the references without going back. `what`
+// prefixes errors.
+Status validate_triangle_refs(const std::string& what, std::span<const uint32_t> refs,
+                              std::span<const Triangle> triangles, std::span<const BvhHitRecord> records);
+Status validate_cell_starts(const std::string& what, std::span<const uint32_t> cell_starts,
+                            std::size_t reference_count);
 
 }  // namespace outcore

@@ -5,8 +5,8 @@
 #include <cmath>
 #include <utility>
 
+#include "core/accel/grid/grid_filing.h"
 #include "core/accel/triangle_hit_records.h"
-#include "core/geometry/triangle_box_overlap.h"
 #include "core/util/parse_number.h"
 
 namespace outcore {
@@ -71,57 +71,11 @@ std::array<uint32_t, 3> pbrt_resolution(const Vec3d& extent, uint64_t n,
   return resolution;
 }
 
-// Halves every axis (down to one cell).
-void coarsen(std::array<uint32_t, 3>& resolution) {
+}  // namespace
+
+void UniformGridBuilder::coarsen(std::array<uint32_t, 3>& resolution) {
   for (uint32_t& r : resolution) r = std::max<uint32_t>(1, (r + 1) / 2);
 }
-
-struct CellPair {
-  uint32_t cell;
-  uint32_t triangle;
-};
-
-// The (cell, triangle) pairs of every triangle at `grid`'s resolution, in
-// triangle order; false when they exceed `cap` (the caller coarsens).
-bool file_triangles(const UniformGridView& grid, std::span<const Triangle> triangles, uint64_t cap,
-                    std::vector<CellPair>& pairs) {
-  pairs.clear();
-  const double box_margin = cell_filing_margin(grid.bounds, Vec3d(grid.cell_width));
-  const uint32_t rx = grid.resolution[0], ry = grid.resolution[1];
-  auto cell_lo = [&](int a, uint32_t j) { return j == 0 ? grid.bounds.lo[a] : grid.boundary(a, j); };
-  auto cell_hi = [&](int a, uint32_t j) {
-    return j + 1 == grid.resolution[a] ? grid.bounds.hi[a] : grid.boundary(a, j + 1);
-  };
-  for (uint32_t k = 0; k < triangles.size(); ++k) {
-    const Aabb box = triangles[k].bounds();
-    std::array<uint32_t, 3> first{}, last{};
-    for (int a = 0; a < 3; ++a) {
-      first[a] = grid.lowest_cell_holding(a, box.lo[a]);
-      last[a] = grid.highest_cell_holding(a, box.hi[a]);
-    }
-    // A triangle is connected, so its projection on an axis covers every
-    // cell its bounds span there: when its bounds span one row of cells (at
-    // most one axis with more than one), it touches all of them.
-    const int spread_axes = (first[0] != last[0]) + (first[1] != last[1]) + (first[2] != last[2]);
-    const bool test_each_cell = spread_axes > 1;
-    for (uint32_t z = first[2]; z <= last[2]; ++z) {
-      for (uint32_t y = first[1]; y <= last[1]; ++y) {
-        for (uint32_t x = first[0]; x <= last[0]; ++x) {
-          if (test_each_cell) {
-            const Vec3d lo(cell_lo(0, x), cell_lo(1, y), cell_lo(2, z));
-            const Vec3d hi(cell_hi(0, x), cell_hi(1, y), cell_hi(2, z));
-            if (!triangle_may_touch_box(triangles[k], lo, hi, box_margin)) continue;
-          }
-          if (pairs.size() >= cap) return false;
-          pairs.push_back({x + rx * (y + ry * z), k});
-        }
-      }
-    }
-  }
-  return true;
-}
-
-}  // namespace
 
 std::string_view resolution_rule_name(UniformGridBuilder::ResolutionRule rule) {
   return rule == UniformGridBuilder::ResolutionRule::kPbrt ? "pbrt" : "density";
@@ -203,24 +157,18 @@ UniformGridBuilder::Result UniformGridBuilder::build(std::vector<Triangle> trian
   pairs.reserve(2 * n);
   grid.resolution = resolution_for(grid.bounds, n, config);
   while (true) {
-    for (int a = 0; a < 3; ++a) {
-      grid.cell_width[a] = (grid.bounds.hi[a] - grid.bounds.lo[a]) / static_cast<float>(grid.resolution[a]);
-    }
-    if (file_triangles(grid.view(), grid.triangles, references_cap(n), pairs)) break;
+    static_cast<GridLattice&>(grid) = GridLattice::over(grid.bounds, grid.resolution);
+    pairs.clear();
+    if (file_triangles(grid, grid.triangles, {}, references_cap(n), pairs)) break;
     assert(product(grid.resolution) > 1);  // one cell holds each triangle once
     coarsen(grid.resolution);
   }
   result.peak_bytes = pairs.capacity() * sizeof(CellPair);
-
-  // Counting sort of the pairs by cell; within a cell, triangle order.
-  grid.cell_starts.assign(product(grid.resolution) + 1, 0);
-  for (const CellPair& pair : pairs) ++grid.cell_starts[pair.cell + 1];
-  for (std::size_t c = 1; c < grid.cell_starts.size(); ++c) grid.cell_starts[c] += grid.cell_starts[c - 1];
-  grid.refs.resize(pairs.size());
-  std::vector<uint32_t> next(grid.cell_starts.begin(), grid.cell_starts.end() - 1);
-  for (const CellPair& pair : pairs) grid.refs[next[pair.cell]++] = pair.triangle;
-  result.peak_bytes += next.capacity() * sizeof(uint32_t);
+  grid.cell_starts.reserve(product(grid.resolution) + 1);
+  result.peak_bytes += append_cells(pairs, product(grid.resolution), grid.cell_starts, grid.refs);
+  grid.cell_starts.push_back(static_cast<uint32_t>(grid.refs.size()));
   // Exact capacities: memory_bytes() then equals a reloaded grid's.
+  grid.refs.shrink_to_fit();
   grid.triangles.shrink_to_fit();
   return result;
 }

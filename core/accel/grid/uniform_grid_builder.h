@@ -1,10 +1,7 @@
 // UniformGridBuilder: a UniformGrid over a brick's triangles in linear time
 // (Lagae & Dutré 2008): the resolution from a rule, every triangle filed
-// under the cells its bounds span that it may touch (the separating-axis
-// test, triangle_box_overlap.h, for triangles whose bounds span cells along
-// more than one axis),
-// then one counting sort of the (cell, triangle) pairs into the compact
-// arrays. Within a cell, triangles keep their input order.
+// under the cells it may touch (grid_filing.h), then one counting sort of the (cell, triangle) pairs into the
+// compact arrays. Within a cell, triangles keep their input order.
 //
 // Resolution rules (Config::rule):
 // - density: about cells_per_triangle * N cells shaped like the bounds,
@@ -68,6 +65,9 @@ class UniformGridBuilder {
 
   // The resolution a build of n triangles within `bounds` starts from.
   static std::array<uint32_t, 3> resolution_for(const Aabb& bounds, uint64_t n, const Config& config);
+
+  // Halves every axis (down to one cell).
+  static void coarsen(std::array<uint32_t, 3>& resolution);
 
   // Upper bounds, for n triangles: the grid's arrays, and the build's peak
   // scratch.
