@@ -2,7 +2,8 @@
 """Run time against error, per brick-structure configuration (issues 5, 23, 24, 25).
 
 For each configuration (default, embree, embree-robust, bvh-mt,
-bvh-watertight, bvh-double, kdtree, bsp, grid; --configs picks some) and Open3D 0.20's RaycastingScene as a reference point, all in
+bvh-watertight, bvh-double, kdtree, bsp, grid, hgrid, octree, quadtree;
+--configs picks some) and Open3D 0.20's RaycastingScene as a reference point, all in
 the same run, 2 threads each:
 - speed: M rays/s on N incoherent rays (bench/make_rays.py) per scene, the
   median of the warm runs of `outcore trace --repeat R` (engine time), and of
@@ -45,6 +46,9 @@ CONFIGS = {
     "kdtree": ["--brick-accel", "kdtree"],  # watertight, as the default (issue 24)
     "bsp": ["--brick-accel", "bsp"],
     "grid": ["--brick-accel", "grid"],  # watertight (issue 25)
+    "hgrid": ["--brick-accel", "hgrid"],
+    "octree": ["--brick-accel", "octree"],
+    "quadtree": ["--brick-accel", "quadtree"],
 }
 SPEED_SCENES = {
     "bunny": [os.path.join(MODELS, "stanford-bunny.obj")],

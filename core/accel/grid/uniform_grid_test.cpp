@@ -28,6 +28,7 @@
 #include "core/accel/grid/uniform_grid_builder.h"
 #include "core/accel/grid/uniform_grid_traversal.h"
 #include "core/accel/kdtree/split_tree_test_util.h"
+#include "core/accel/serializer_test_util.h"
 
 namespace outcore {
 namespace {
@@ -397,16 +398,8 @@ std::unique_ptr<GridBrickAccel> build_brick(BrickData brick, const GridBrickConf
   return std::move(accel).value();
 }
 
-std::string save(const BrickSerializer& serializer, const BrickAccel& accel) {
-  std::ostringstream out;
-  const Status saved = serializer.save(accel, out);
-  EXPECT_TRUE(saved.ok()) << saved.to_string();
-  return std::move(out).str();
-}
-
-SerializedBrick unowned(std::string_view bytes) {
-  return SerializedBrick{bytes, nullptr, false};
-}
+using serializer_test::save;
+using serializer_test::unowned;
 
 TEST(GridBrickSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
   for (const TriangleTest test : kAllTriangleTests) {
@@ -419,15 +412,7 @@ TEST(GridBrickSerializer, RoundTripAnswersBitwiseAndKeepsMemoryAndCounts) {
       ASSERT_TRUE(loaded.ok()) << loaded.status().to_string();
       EXPECT_EQ((*loaded)->memory_bytes(), built->memory_bytes()) << spec;
       EXPECT_EQ((*loaded)->triangle_count(), built->triangle_count());
-      const auto rays = mixed_rays(brick, 1500, 5);
-      std::vector<Hit> a(rays.size()), b(rays.size());
-      built->intersect(all_ids(rays.size()), rays.data(), a.data());
-      (*loaded)->intersect(all_ids(rays.size()), rays.data(), b.data());
-      EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(Hit)), 0) << spec;
-      std::vector<uint8_t> oa(rays.size(), 0), ob(rays.size(), 0);
-      built->occluded(all_ids(rays.size()), rays.data(), oa.data());
-      (*loaded)->occluded(all_ids(rays.size()), rays.data(), ob.data());
-      EXPECT_EQ(oa, ob) << spec;
+      serializer_test::expect_same_answers(*built, **loaded, mixed_rays(brick, 1500, 5), spec);
     }
   }
   // An empty brick.
@@ -492,33 +477,11 @@ TEST(GridBrickSerializer, FuzzedPayloadsNeverCrash) {
   const GridBrickSerializer serializer(config_with(TriangleTest::kWatertight));
   const auto built = build_brick(brick, config_with(TriangleTest::kWatertight));
   const std::string payload = save(serializer, *built);
-  const auto rays = mixed_rays(brick, 800, 3);
-  std::mt19937_64 rng(11);
-  std::size_t refused = 0, loaded_count = 0;
-  for (int round = 0; round < 400; ++round) {
-    std::string bytes = payload;
-    const int flips = 1 + static_cast<int>(rng() % 4);
-    for (int f = 0; f < flips; ++f) {
-      // Half the flips in the header and the cell starts, where damage
-      // matters most.
-      const std::size_t span =
-          round % 2 == 0 ? std::min<std::size_t>(bytes.size(), 96 + 4 * 64) : bytes.size();
-      bytes[rng() % span] ^= static_cast<char>(1u << (rng() % 8));
-    }
-    auto loaded = serializer.load(unowned(bytes), 0, built->triangle_count());
-    if (!loaded.ok()) {
-      EXPECT_EQ(loaded.status().code(), StatusCode::kInvalidArgument) << loaded.status().to_string();
-      ++refused;
-      continue;
-    }
-    ++loaded_count;
-    std::vector<Hit> hits(rays.size());
-    (*loaded)->intersect(all_ids(rays.size()), rays.data(), hits.data());
-    std::vector<uint8_t> occluded(rays.size(), 0);
-    (*loaded)->occluded(all_ids(rays.size()), rays.data(), occluded.data());
-  }
-  EXPECT_GT(refused, 0u);
-  EXPECT_GT(loaded_count, 0u);
+  // The header and the first cell starts, where damage matters most.
+  const auto outcome = serializer_test::fuzz(serializer, payload, built->triangle_count(),
+                                             mixed_rays(brick, 800, 3), 96 + 4 * 64);
+  EXPECT_GT(outcome.refused, 0u);
+  EXPECT_GT(outcome.loaded, 0u);
 }
 
 TEST(GridBrickSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {

@@ -8,7 +8,6 @@
 
 #include "core/accel/triangle_hit_records.h"
 #include "core/geometry/triangle_box_overlap.h"
-#include "core/util/parse_number.h"
 
 namespace outcore {
 namespace {
@@ -121,35 +120,6 @@ class Build {
 };
 
 }  // namespace
-
-Status OctreeBuilder::Config::validate() const {
-  if (max_leaf_size < 1 || max_leaf_size > 1024) {
-    return invalid_argument("octree: max_leaf_size must be in [1, 1024], got " +
-                            std::to_string(max_leaf_size));
-  }
-  if (max_depth >= kMaxOctreeDepth) {
-    return invalid_argument("octree: max_depth must be below " + std::to_string(kMaxOctreeDepth) + ", got " +
-                            std::to_string(max_depth));
-  }
-  return Status::Ok();
-}
-
-Expected<bool> OctreeBuilder::Config::parse_option(std::string_view structure, const std::string& key,
-                                                   const std::string& value) {
-  if (key != "max_leaf_size" && key != "max_depth") return false;
-  if (!parse_number(value, key == "max_leaf_size" ? max_leaf_size : max_depth)) {
-    return invalid_argument("brick accel " + std::string(structure) + ": option " + key +
-                            " must be a whole number, got '" + value + "'");
-  }
-  return true;
-}
-
-uint32_t OctreeBuilder::depth_limit(const Config& config, uint64_t n) {
-  if (config.max_depth != 0) return config.max_depth;
-  const double leaves = std::max(1.0, static_cast<double>(n) / config.max_leaf_size);
-  const double automatic = std::ceil(std::log2(leaves) / 2.0) + 2.0;
-  return std::min<uint32_t>(kMaxOctreeDepth - 1, static_cast<uint32_t>(automatic));
-}
 
 uint64_t OctreeBuilder::tree_bytes_bound(uint64_t n) {
   return nodes_cap(n) * sizeof(OctreeNode) + references_cap(n) * sizeof(uint32_t) +

@@ -15,11 +15,10 @@
 #pragma once
 
 #include <cstdint>
-#include <string>
-#include <string_view>
 #include <vector>
 
 #include "core/accel/octree/octree.h"
+#include "core/accel/octree/subdivision_config.h"
 #include "core/geometry/triangle.h"
 #include "core/store/brick_data.h"
 #include "core/util/status.h"
@@ -28,19 +27,7 @@ namespace outcore {
 
 class OctreeBuilder {
  public:
-  struct Config {
-    uint32_t max_leaf_size = 8;  // triangles a leaf may hold before it is cut
-    // Levels below the root, at most kMaxOctreeDepth - 1; 0: automatic,
-    // ceil(log4(N / max_leaf_size)) + 2 (a surface's triangles fill about 4^d
-    // cells at depth d, so leaves of max_leaf_size come about there).
-    uint32_t max_depth = 0;
-
-    Status validate() const;
-    // Sets the option `key` (max_leaf_size, max_depth) from `value`: false
-    // when `key` is none of them, an error naming `structure` when the value
-    // is malformed.
-    Expected<bool> parse_option(std::string_view structure, const std::string& key, const std::string& value);
-  };
+  using Config = SubdivisionConfig<OctreeNode>;
 
   static constexpr uint64_t kMaxReferencesPerTriangle = 8;
   static constexpr uint64_t kMaxTriangles = uint64_t{1} << 24;
@@ -63,7 +50,7 @@ class OctreeBuilder {
   static uint64_t references_cap(uint64_t n) { return kMaxReferencesPerTriangle * n + 64; }
   static uint64_t nodes_cap(uint64_t n) { return 4 * references_cap(n) + 1; }
   // The depth limit a build of n triangles uses.
-  static uint32_t depth_limit(const Config& config, uint64_t n);
+  static uint32_t depth_limit(const Config& config, uint64_t n) { return config.depth_limit(n); }
 };
 
 }  // namespace outcore
