@@ -45,7 +45,23 @@ struct AxisRun {
   bool forward = true;
   float origin = 0, inverse_direction = 0;
   float next_entry = kInf;  // widened start of cell front + 1's part, or inf
+  float front_exit = kInf;  // widened end of cell front's part, or inf (the last cell)
   float back_exit = kInf;   // widened end of cell back's part, or inf (the last cell)
+
+  bool single() const { return back == front; }
+  // Moves front to the next cell; its crossing out gives both the next
+  // entry and its exit (one boundary computed a step).
+  template <class CrossingAt>
+  void step(CrossingAt&& crossing_after) {
+    ++front;
+    if (front + 1 < cells) {
+      const auto c = crossing_after(front);
+      next_entry = c.lo;
+      front_exit = c.hi;
+    } else {
+      next_entry = front_exit = kInf;
+    }
+  }
 
   uint32_t cell(uint32_t k) const { return forward ? k : cells - 1 - k; }
 };
@@ -80,7 +96,11 @@ inline AxisRun start_run(const GridLattice& grid, int axis, const Ray& ray, floa
   // ray may be in at `start`.
   while (run.back > 0 && crossing(grid, axis, run, run.back - 1).hi >= start) --run.back;
   while (run.front + 1 < run.cells && crossing(grid, axis, run, run.front).lo <= start) ++run.front;
-  if (run.front + 1 < run.cells) run.next_entry = crossing(grid, axis, run, run.front).lo;
+  if (run.front + 1 < run.cells) {
+    const Crossing c = crossing(grid, axis, run, run.front);
+    run.next_entry = c.lo;
+    run.front_exit = c.hi;
+  }
   if (run.back + 1 < run.cells) run.back_exit = crossing(grid, axis, run, run.back).hi;
   return run;
 }
@@ -99,7 +119,11 @@ inline void walk_cells(const GridLattice& grid, const Ray& ray, const bvh_detail
   // Visits the cells in the product of the runs, axis `fixed` pinned to its
   // front cell (or every cell of every run when fixed < 0).
   auto visit = [&](int fixed) {
-    if (runs[0].back == runs[0].front && runs[1].back == runs[1].front && runs[2].back == runs[2].front) {
+    // Usually one cell: every run single, or only the axis just stepped
+    // still holding the cell it left (which the product skips).
+    const bool others_single = (fixed == 0 || runs[0].single()) && (fixed == 1 || runs[1].single()) &&
+                               (fixed == 2 || runs[2].single());
+    if (others_single) {
       return visit_cell(grid.cell_index(runs[0].cell(runs[0].front), runs[1].cell(runs[1].front),
                                         runs[2].cell(runs[2].front)));
     }
@@ -130,12 +154,13 @@ inline void walk_cells(const GridLattice& grid, const Ray& ray, const bvh_detail
     for (AxisRun& run : runs) {
       while (run.back < run.front && run.back_exit < entry) {
         ++run.back;
-        run.back_exit = crossing(grid, static_cast<int>(&run - runs.data()), run, run.back).hi;
+        run.back_exit = run.back == run.front
+                            ? run.front_exit
+                            : crossing(grid, static_cast<int>(&run - runs.data()), run, run.back).hi;
       }
     }
     AxisRun& run = runs[axis];
-    ++run.front;
-    run.next_entry = run.front + 1 < run.cells ? crossing(grid, axis, run, run.front).lo : kInf;
+    run.step([&](uint32_t k) { return crossing(grid, axis, run, k); });
     if (visit(axis)) return;
   }
 }

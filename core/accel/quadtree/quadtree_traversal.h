@@ -92,14 +92,19 @@ inline void traverse(const QuadtreeView& tree, const Ray& ray, float tmin, float
     uint32_t found = 0;
     const float node_end = std::min(segment_max, limit);
     for (uint32_t k = 0; k < 4; ++k) {
+      // The plane first (cheap, and rules out the children off the ray's
+      // path), then the child's height slab.
+      float start = std::max({cell.entry, k & 1u ? along_u.upper_start : along_u.lower_start,
+                              k & 2u ? along_v.upper_start : along_v.lower_start});
+      float end = std::min({node_end, k & 1u ? along_u.upper_end : along_u.lower_end,
+                            k & 2u ? along_v.upper_end : along_v.lower_end});
+      if (!(start <= end)) continue;
       const QuadtreeNode& child = tree.nodes[node.first_child() + k];
       if (child.is_empty()) continue;
-      float start, end;
-      slab_part(ray, inverse_w, axes.w, child.w_lo, child.w_hi, start, end);
-      start = std::max({start, cell.entry, k & 1u ? along_u.upper_start : along_u.lower_start,
-                        k & 2u ? along_v.upper_start : along_v.lower_start});
-      end = std::min({end, node_end, k & 1u ? along_u.upper_end : along_u.lower_end,
-                      k & 2u ? along_v.upper_end : along_v.lower_end});
+      float slab_start, slab_end;
+      slab_part(ray, inverse_w, axes.w, child.w_lo, child.w_hi, slab_start, slab_end);
+      start = std::max(start, slab_start);
+      end = std::min(end, slab_end);
       if (!(start <= end)) continue;
       uint32_t at = found++;
       while (at > 0 && children[at - 1].first > start) {
