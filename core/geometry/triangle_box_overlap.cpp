@@ -51,4 +51,45 @@ bool triangle_may_touch_box(const Triangle& triangle, const Vec3d& lo, const Vec
   return true;
 }
 
+TriangleBoxOverlap::TriangleBoxOverlap(const Triangle& triangle) {
+  const Vec3d a(triangle.v0), b(triangle.v1), c(triangle.v2);
+  const Vec3d edges[3] = {b - a, c - b, a - c};
+  const Vec3d unit[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  axes_[0] = cross(edges[0], edges[1]);
+  int k = 1;
+  for (const Vec3d& edge : edges) {
+    for (const Vec3d& axis : unit) axes_[k++] = cross(edge, axis);
+  }
+  for (k = 0; k < kAxes; ++k) {
+    const double pa = dot(axes_[k], a), pb = dot(axes_[k], b), pc = dot(axes_[k], c);
+    min_[k] = std::min({pa, pb, pc});
+    max_[k] = std::max({pa, pb, pc});
+    magnitude_[k] = std::max({std::abs(pa), std::abs(pb), std::abs(pc)});
+  }
+}
+
+bool TriangleBoxOverlap::may_touch_overlapping_box(const Vec3d& lo, const Vec3d& hi, double margin) const {
+  return separated_along_none(lo, hi, margin, kAxes);
+}
+
+bool TriangleBoxOverlap::plane_may_touch_box(const Vec3d& lo, const Vec3d& hi, double margin) const {
+  return separated_along_none(lo, hi, margin, 1);
+}
+
+bool TriangleBoxOverlap::separated_along_none(const Vec3d& lo, const Vec3d& hi, double margin,
+                                              int axes) const {
+  const Vec3d center = (lo + hi) * 0.5;
+  const Vec3d h = (hi - lo) * 0.5 + Vec3d(margin, margin, margin);
+  for (int k = 0; k < axes; ++k) {
+    const Vec3d& axis = axes_[k];
+    const double at_center = dot(axis, center);
+    const double radius = h.x * std::abs(axis.x) + h.y * std::abs(axis.y) + h.z * std::abs(axis.z);
+    // Projections taken from the origin: the slack scales with every
+    // magnitude involved, the centre's and the vertices' included.
+    const double slack = (radius + magnitude_[k] + std::abs(at_center)) * kRelativeSlack;
+    if (min_[k] - at_center > radius + slack || max_[k] - at_center < -radius - slack) return false;
+  }
+  return true;
+}
+
 }  // namespace outcore

@@ -19,6 +19,32 @@ namespace outcore {
 // Box [lo, hi] (float64), grown by margin >= 0 on every side.
 bool triangle_may_touch_box(const Triangle& triangle, const Vec3d& lo, const Vec3d& hi, double margin);
 
+// The same test against many boxes the triangle's bounds overlap (a
+// structure's cells within the span of its bounds): the ten axes that are
+// the triangle's own (its normal and the nine edge-by-axis products) and
+// the triangle's extent along each are computed once, so a box costs ten
+// dot products. The box's own three axes are left out: bounds that overlap
+// the box cannot be separated from it along them. Conservative as
+// triangle_may_touch_box (the slack covers the rounding of projections
+// taken from the origin rather than the box's centre).
+class TriangleBoxOverlap {
+ public:
+  explicit TriangleBoxOverlap(const Triangle& triangle);
+  // `lo`..`hi` must overlap the triangle's bounds (closed).
+  bool may_touch_overlapping_box(const Vec3d& lo, const Vec3d& hi, double margin) const;
+  // Whether the triangle's plane may touch the box: the first of the ten
+  // axes only, a superset of may_touch_overlapping_box() at a tenth of the
+  // cost (the grids file by it: docs/BENCHMARKS.md, "Grids").
+  bool plane_may_touch_box(const Vec3d& lo, const Vec3d& hi, double margin) const;
+
+ private:
+  bool separated_along_none(const Vec3d& lo, const Vec3d& hi, double margin, int axes) const;
+
+  static constexpr int kAxes = 10;
+  Vec3d axes_[kAxes];
+  double min_[kAxes], max_[kAxes], magnitude_[kAxes];
+};
+
 // The margin a structure grows its cells by when it files triangles into
 // cells of `cell_size` within `region` (the grid's, an octree node's
 // children): 2^-20 of the cell size plus the coordinates' magnitude, far

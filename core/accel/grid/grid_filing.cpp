@@ -1,6 +1,7 @@
 #include "core/accel/grid/grid_filing.h"
 
 #include <array>
+#include <optional>
 
 #include "core/geometry/triangle_box_overlap.h"
 
@@ -20,12 +21,14 @@ bool file_triangles(const GridLattice& lattice, std::span<const Triangle> triang
     }
     const int spread_axes = (first[0] != last[0]) + (first[1] != last[1]) + (first[2] != last[2]);
     const bool test_each_cell = spread_axes > 1;
+    std::optional<TriangleBoxOverlap> overlap;
+    if (test_each_cell) overlap.emplace(triangles[k]);
     for (uint32_t z = first[2]; z <= last[2]; ++z) {
       for (uint32_t y = first[1]; y <= last[1]; ++y) {
         for (uint32_t x = first[0]; x <= last[0]; ++x) {
           if (test_each_cell) {
             const Aabb cell = lattice.cell_box(x, y, z);
-            if (!triangle_may_touch_box(triangles[k], Vec3d(cell.lo), Vec3d(cell.hi), box_margin)) continue;
+            if (!overlap->plane_may_touch_box(Vec3d(cell.lo), Vec3d(cell.hi), box_margin)) continue;
           }
           if (pairs.size() >= cap) return false;
           pairs.push_back({lattice.cell_index(x, y, z), k});

@@ -4,6 +4,7 @@
 #include <array>
 #include <cassert>
 #include <cmath>
+#include <optional>
 #include <utility>
 
 #include "core/accel/triangle_hit_records.h"
@@ -96,12 +97,14 @@ class Build {
       }
       const uint32_t spread = low_mask & high_mask;
       const bool test_each_child = (spread & (spread - 1)) != 0;  // two or more axes
+      std::optional<TriangleBoxOverlap> overlap;
+      if (test_each_child) overlap.emplace(triangles_[tri]);
       for (uint32_t k = 0; k < 8; ++k) {
         // Child k's half along axis a must be one the bounds reach.
         if ((~k & ~low_mask & 7u) != 0 || (k & ~high_mask & 7u) != 0) continue;
         if (test_each_child) {
           const Aabb box = octree_child_box(node.box, middle, k);
-          if (!triangle_may_touch_box(triangles_[tri], Vec3d(box.lo), Vec3d(box.hi), margin)) continue;
+          if (!overlap->may_touch_overlapping_box(Vec3d(box.lo), Vec3d(box.hi), margin)) continue;
         }
         children[k].push_back(tri);
       }

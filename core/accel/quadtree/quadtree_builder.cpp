@@ -5,6 +5,7 @@
 #include <cassert>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <utility>
 
 #include "core/accel/triangle_hit_records.h"
@@ -105,12 +106,14 @@ class Build {
       const uint32_t high_mask =
           (b.hi[axes_.u] >= middle_u ? 1u : 0u) | (b.hi[axes_.v] >= middle_v ? 2u : 0u);
       const bool test_each_child = (low_mask & high_mask) == 3u;
+      std::optional<TriangleBoxOverlap> overlap;
+      if (test_each_child) overlap.emplace(triangles_[tri]);
       for (uint32_t k = 0; k < 4; ++k) {
         // Child k's half along each axis must be one the bounds reach.
         if ((~k & ~low_mask & 3u) != 0 || (k & ~high_mask & 3u) != 0) continue;
         if (test_each_child) {
           const Aabb box = quadtree_child_box(node.box, axes_, middle_u, middle_v, k);
-          if (!triangle_may_touch_box(triangles_[tri], Vec3d(box.lo), Vec3d(box.hi), margin)) continue;
+          if (!overlap->may_touch_overlapping_box(Vec3d(box.lo), Vec3d(box.hi), margin)) continue;
         }
         children[k].push_back(tri);
       }
