@@ -109,12 +109,21 @@ def draw(rows, png):
     import matplotlib.pyplot as plt
     bounds = [r for r in rows if r["part"] == "bounds"]
     structures = [r for r in rows if r["part"] == "structure"]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
-    labels = [f"{r['scene']}\n{r['rays']}\n{r['accel']}" for r in structures]
-    axes[0].bar(range(len(structures)), [r["warm_vs_bvh"] for r in structures])
-    axes[0].set_xticks(range(len(structures)), labels, fontsize=6)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.8), gridspec_kw={"width_ratios": [3, 1]})
+    # Grouped: one group per (scene, rays), one bar per structure.
+    groups = list(dict.fromkeys((r["scene"], r["rays"]) for r in structures))
+    accels = list(dict.fromkeys(r["accel"] for r in structures))
+    width = 0.8 / max(1, len(accels))
+    for i, accel in enumerate(accels):
+        values = {(r["scene"], r["rays"]): r["warm_vs_bvh"] for r in structures if r["accel"] == accel}
+        axes[0].bar([g + i * width for g in range(len(groups))], [values.get(k, 0) for k in groups], width,
+                    label=accel)
+    axes[0].set_xticks([g + 0.4 - width / 2 for g in range(len(groups))], [f"{s}\n{k}" for s, k in groups],
+                       fontsize=8)
+    axes[0].set_yscale("log")
     axes[0].axhline(1.0, color="grey", lw=0.8)
-    axes[0].set_title("warm trace time, x the bvh (lower is faster)")
+    axes[0].set_title("warm trace time, x the bvh's (log; lower is faster)")
+    axes[0].legend(fontsize=7, ncol=len(accels))
     labels = [f"{r['rays']}\n{r['bound']}" for r in bounds]
     axes[1].bar(range(len(bounds)), [r["without_hit_vs_aabb"] or 0 for r in bounds], label="visits without a hit")
     axes[1].plot(range(len(bounds)), [r["warm_vs_aabb"] for r in bounds], "ro", label="warm time")
