@@ -1,11 +1,9 @@
-// Engine-level tests of our brick structures ("bvh", "kdtree", "bsp", "grid", "hgrid", "octree", "quadtree") and the
-// "reference" one: a packed store traced through QueryEngine with each
-// structure and every triangle test answers as the float64 brute force does,
-// bitwise the same with one big brick or many tiny ones, under a budget of
-// two bricks, with the rays queued at bricks or run one by one, and across
-// structures (both are exact walks over the same triangle test); the
-// "reference" structure (what `outcore trace --reference` uses) agrees with
-// brute_force_reference.h.
+// Engine-level tests of our brick structures ("bvh", "kdtree", "bsp", "grid", "hgrid", "octree", "quadtree")
+// and the "reference" one: a packed store traced through QueryEngine with each structure and every triangle
+// test answers as the float64 brute force does, bitwise the same with one big brick or many tiny ones, under
+// a budget of two bricks, with the rays queued at bricks or run one by one, and across structures (both are
+// exact walks over the same triangle test); the "reference" structure (what `outcore trace --reference` uses)
+// agrees with brute_force_reference.h.
 #include <gtest/gtest.h>
 
 #include <algorithm>
