@@ -494,7 +494,8 @@ constexpr std::pair<const char*, const char*> kTierStructuresAndTests[] = {{"bvh
                                                                            {"grid", "watertight"},
                                                                            {"grid", "double"},
                                                                            {"octree", "watertight"},
-                                                                           {"quadtree", "watertight"}, {"hgrid", "watertight"}};
+                                                                           {"quadtree", "watertight"},
+                                                                           {"hgrid", "watertight"}};
 
 TEST(SubtreeTierEngine, TinyBudgetWithTheTierAnswersLikeAnUnlimitedBudget) {
   const auto scene = testing::pack_test_scene(
