@@ -69,27 +69,35 @@ TriangleBoxOverlap::TriangleBoxOverlap(const Triangle& triangle) {
 }
 
 bool TriangleBoxOverlap::may_touch_overlapping_box(const Vec3d& lo, const Vec3d& hi, double margin) const {
-  return separated_along_none(lo, hi, margin, kAxes);
+  const Box box(lo, hi, margin);
+  for (int k = 0; k < kAxes; ++k) {
+    if (separates(k, box)) return false;
+  }
+  return true;
 }
 
 bool TriangleBoxOverlap::plane_may_touch_box(const Vec3d& lo, const Vec3d& hi, double margin) const {
-  return separated_along_none(lo, hi, margin, 1);
+  return !separates(0, Box(lo, hi, margin));
 }
 
-bool TriangleBoxOverlap::separated_along_none(const Vec3d& lo, const Vec3d& hi, double margin,
-                                              int axes) const {
-  const Vec3d center = (lo + hi) * 0.5;
-  const Vec3d h = (hi - lo) * 0.5 + Vec3d(margin, margin, margin);
-  for (int k = 0; k < axes; ++k) {
-    const Vec3d& axis = axes_[k];
-    const double at_center = dot(axis, center);
-    const double radius = h.x * std::abs(axis.x) + h.y * std::abs(axis.y) + h.z * std::abs(axis.z);
-    // Projections taken from the origin: the slack scales with every
-    // magnitude involved, the centre's and the vertices' included.
-    const double slack = (radius + magnitude_[k] + std::abs(at_center)) * kRelativeSlack;
-    if (min_[k] - at_center > radius + slack || max_[k] - at_center < -radius - slack) return false;
+bool TriangleBoxOverlap::may_touch_overlapping_column(const Vec3d& lo, const Vec3d& hi, double margin,
+                                                      int axis) const {
+  const Box box(lo, hi, margin);
+  // The products of each edge with the column's axis: axes_[1 + 3 e + axis].
+  for (int edge = 0; edge < 3; ++edge) {
+    if (separates(1 + 3 * edge + axis, box)) return false;
   }
   return true;
+}
+
+bool TriangleBoxOverlap::separates(int k, const Box& box) const {
+  const Vec3d& axis = axes_[k];
+  const double at_center = dot(axis, box.center);
+  const double radius = box.h.x * std::abs(axis.x) + box.h.y * std::abs(axis.y) + box.h.z * std::abs(axis.z);
+  // Projections taken from the origin: the slack scales with every
+  // magnitude involved, the centre's and the vertices' included.
+  const double slack = (radius + magnitude_[k] + std::abs(at_center)) * kRelativeSlack;
+  return min_[k] - at_center > radius + slack || max_[k] - at_center < -radius - slack;
 }
 
 }  // namespace outcore

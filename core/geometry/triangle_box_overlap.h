@@ -36,12 +36,23 @@ class TriangleBoxOverlap {
   // axes only, a superset of may_touch_overlapping_box() at a tenth of the
   // cost (the grids file by it: docs/BENCHMARKS.md, "Grids").
   bool plane_may_touch_box(const Vec3d& lo, const Vec3d& hi, double margin) const;
+  // Whether the triangle may touch the column [lo, hi] unbounded along
+  // `axis` (the quadtree's cells): exact for a column, whose only
+  // separating axes besides its own are the products of the triangle's
+  // edges with `axis` (three of the ten). `lo`..`hi` must overlap the
+  // triangle's bounds across `axis`.
+  bool may_touch_overlapping_column(const Vec3d& lo, const Vec3d& hi, double margin, int axis) const;
 
  private:
-  bool separated_along_none(const Vec3d& lo, const Vec3d& hi, double margin, int axes) const;
+  struct Box {
+    Box(const Vec3d& lo, const Vec3d& hi, double margin)
+        : center((lo + hi) * 0.5), h((hi - lo) * 0.5 + Vec3d(margin, margin, margin)) {}
+    Vec3d center, h;
+  };
+  bool separates(int k, const Box& box) const;
 
   static constexpr int kAxes = 10;
-  Vec3d axes_[kAxes];
+  Vec3d axes_[kAxes];  // the normal, then edge e x unit axis a at 1 + 3 e + a
   double min_[kAxes], max_[kAxes], magnitude_[kAxes];
 };
 

@@ -63,6 +63,9 @@ TEST(TriangleBoxOverlap, NeverRejectsABoxHoldingAPointOfTheTriangle) {
         if (bounds_overlap(tri, lo, hi)) {
           EXPECT_TRUE(overlap.may_touch_overlapping_box(lo, hi, margin)) << "offset " << offset;
           EXPECT_TRUE(overlap.plane_may_touch_box(lo, hi, margin)) << "offset " << offset;
+          for (int axis = 0; axis < 3; ++axis) {
+            EXPECT_TRUE(overlap.may_touch_overlapping_column(lo, hi, margin, axis)) << "offset " << offset;
+          }
           ++checked;
         }
       }
@@ -88,6 +91,10 @@ TEST(TriangleBoxOverlap, RejectsBoxesWithinTheBoundsButOffTheTriangle) {
   const Vec3d lo{0.7, 0.7, 0.0}, hi{0.9, 0.9, 0.05};
   EXPECT_FALSE(triangle_may_touch_box(tri, lo, hi, 0.0));
   EXPECT_FALSE(overlap.may_touch_overlapping_box(lo, hi, 0.0));
+  // The column over (0.8, 0.8) along z misses it (x + y > 1 there); the
+  // one over (0.2, 0.2) meets it.
+  EXPECT_FALSE(overlap.may_touch_overlapping_column({0.8, 0.8, 0}, {0.9, 0.9, 1}, 0.0, 2));
+  EXPECT_TRUE(overlap.may_touch_overlapping_column({0.2, 0.2, 0.9}, {0.3, 0.3, 1}, 0.0, 2));
   // And one it touches.
   EXPECT_TRUE(overlap.may_touch_overlapping_box({0.3, 0.3, 0.3}, {0.4, 0.4, 0.4}, 0.0));
 }
@@ -97,6 +104,7 @@ TEST(TriangleBoxOverlap, ThePerTriangleFormAgreesWithTheOneShotTest) {
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   std::size_t boxes = 0, disagreements = 0, rejected = 0;
   std::size_t plane_stricter = 0, plane_looser = 0, plane_rejected = 0;
+  std::size_t column_stricter = 0, column_rejected = 0;
   for (int t = 0; t < 500; ++t) {
     const Triangle tri = random_triangle(rng, 0.0);
     const TriangleBoxOverlap overlap(tri);
@@ -117,6 +125,12 @@ TEST(TriangleBoxOverlap, ThePerTriangleFormAgreesWithTheOneShotTest) {
       plane_stricter += one_shot && !plane;
       plane_looser += plane && !one_shot;
       plane_rejected += !plane;
+      // A column holds the box, so it is rejected only where the box is.
+      for (int axis = 0; axis < 3; ++axis) {
+        const bool column = overlap.may_touch_overlapping_column(lo, hi, 1e-9, axis);
+        column_stricter += one_shot && !column;
+        column_rejected += !column;
+      }
     }
   }
   EXPECT_GT(rejected, boxes / 10);  // the boxes are not all trivially touched
@@ -124,6 +138,8 @@ TEST(TriangleBoxOverlap, ThePerTriangleFormAgreesWithTheOneShotTest) {
   EXPECT_EQ(plane_stricter, 0u);
   EXPECT_GT(plane_looser, 0u);
   EXPECT_GT(plane_rejected, boxes / 20);  // the plane alone still rejects boxes
+  EXPECT_EQ(column_stricter, 0u);
+  EXPECT_GT(column_rejected, boxes / 20);
 }
 
 }  // namespace

@@ -113,7 +113,7 @@ class Build {
         if ((~k & ~low_mask & 3u) != 0 || (k & ~high_mask & 3u) != 0) continue;
         if (test_each_child) {
           const Aabb box = quadtree_child_box(node.box, axes_, middle_u, middle_v, k);
-          if (!overlap->may_touch_overlapping_box(Vec3d(box.lo), Vec3d(box.hi), margin)) continue;
+          if (!overlap->may_touch_overlapping_column(Vec3d(box.lo), Vec3d(box.hi), margin, axes_.w)) continue;
         }
         children[k].push_back(tri);
       }
