@@ -23,6 +23,11 @@
 
 namespace outcore {
 
+// Cells of a resolution: resolution[0] * resolution[1] * resolution[2].
+inline uint64_t cell_count_of(const std::array<uint32_t, 3>& resolution) {
+  return uint64_t{resolution[0]} * resolution[1] * resolution[2];
+}
+
 struct GridLattice {
   Aabb bounds;
   std::array<uint32_t, 3> resolution{0, 0, 0};
@@ -37,7 +42,7 @@ struct GridLattice {
     return lattice;
   }
 
-  uint64_t cell_count() const { return uint64_t{resolution[0]} * resolution[1] * resolution[2]; }
+  uint64_t cell_count() const { return cell_count_of(resolution); }
   uint32_t cell_index(uint32_t x, uint32_t y, uint32_t z) const {
     return x + resolution[0] * (y + resolution[1] * z);
   }

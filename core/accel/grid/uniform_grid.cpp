@@ -2,23 +2,13 @@
 
 #include <string>
 
+#include "core/accel/triangle_hit_records.h"
+
 namespace outcore {
 
-Status validate_triangle_refs(const std::string& what, std::span<const uint32_t> refs,
-                              std::span<const Triangle> triangles, std::span<const BvhHitRecord> records) {
-  if (records.size() != triangles.size()) {
-    return invalid_argument(what + ": " + std::to_string(records.size()) + " hit records for " +
-                            std::to_string(triangles.size()) + " triangles");
-  }
-  for (std::size_t k = 0; k < refs.size(); ++k) {
-    if (refs[k] >= triangles.size()) {
-      return invalid_argument(what + ": reference " + std::to_string(k) + " names triangle " +
-                              std::to_string(refs[k]) + " of " + std::to_string(triangles.size()));
-    }
-  }
-  return Status::Ok();
-}
+namespace {
 
+// Non-empty cell starts run from 0 to the references without going back.
 Status validate_cell_starts(const std::string& what, std::span<const uint32_t> cell_starts,
                             std::size_t reference_count) {
   if (cell_starts.front() != 0 || cell_starts.back() != reference_count) {
@@ -33,6 +23,8 @@ Status validate_cell_starts(const std::string& what, std::span<const uint32_t> c
   }
   return Status::Ok();
 }
+
+}  // namespace
 
 Status UniformGridView::validate() const {
   OUTCORE_RETURN_IF_ERROR(validate_triangle_refs("grid", refs, triangles, records));

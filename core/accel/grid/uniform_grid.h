@@ -64,13 +64,4 @@ struct UniformGrid : GridLattice {
   }
 };
 
-// What a grid's validate() checks of its arrays (the hierarchical grid's
-// too): records match triangles and references name triangles; cell starts
-// (non-empty) run from 0 to the references without going back. `what`
-// prefixes errors.
-Status validate_triangle_refs(const std::string& what, std::span<const uint32_t> refs,
-                              std::span<const Triangle> triangles, std::span<const BvhHitRecord> records);
-Status validate_cell_starts(const std::string& what, std::span<const uint32_t> cell_starts,
-                            std::size_t reference_count);
-
 }  // namespace outcore

@@ -19,10 +19,6 @@ uint64_t references_cap(uint64_t n) {
   return UniformGridBuilder::kMaxReferencesPerTriangle * n + 64;
 }
 
-uint64_t product(const std::array<uint32_t, 3>& r) {
-  return uint64_t{r[0]} * r[1] * r[2];
-}
-
 uint32_t clamp_cells(double cells, uint32_t max_resolution) {
   if (!(cells >= 1.0)) return 1;
   return static_cast<uint32_t>(std::min<double>(std::lround(cells), max_resolution));
@@ -126,7 +122,7 @@ std::array<uint32_t, 3> UniformGridBuilder::resolution_for(const Aabb& bounds, u
   std::array<uint32_t, 3> resolution = config.rule == ResolutionRule::kPbrt
                                            ? pbrt_resolution(extent, n, config)
                                            : density_resolution(extent, n, config);
-  while (product(resolution) > cells_cap(n)) coarsen(resolution);
+  while (cell_count_of(resolution) > cells_cap(n)) coarsen(resolution);
   return resolution;
 }
 
@@ -160,12 +156,12 @@ UniformGridBuilder::Result UniformGridBuilder::build(std::vector<Triangle> trian
     static_cast<GridLattice&>(grid) = GridLattice::over(grid.bounds, grid.resolution);
     pairs.clear();
     if (file_triangles(grid, grid.triangles, {}, references_cap(n), pairs)) break;
-    assert(product(grid.resolution) > 1);  // one cell holds each triangle once
+    assert(cell_count_of(grid.resolution) > 1);  // one cell holds each triangle once
     coarsen(grid.resolution);
   }
   result.peak_bytes = pairs.capacity() * sizeof(CellPair);
-  grid.cell_starts.reserve(product(grid.resolution) + 1);
-  result.peak_bytes += append_cells(pairs, product(grid.resolution), grid.cell_starts, grid.refs);
+  grid.cell_starts.reserve(cell_count_of(grid.resolution) + 1);
+  result.peak_bytes += append_cells(pairs, cell_count_of(grid.resolution), grid.cell_starts, grid.refs);
   grid.cell_starts.push_back(static_cast<uint32_t>(grid.refs.size()));
   // Exact capacities: memory_bytes() then equals a reloaded grid's.
   grid.refs.shrink_to_fit();

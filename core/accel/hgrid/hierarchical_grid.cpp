@@ -3,7 +3,7 @@
 #include <string>
 #include <utility>
 
-#include "core/accel/grid/uniform_grid.h"
+#include "core/accel/triangle_hit_records.h"
 
 namespace outcore {
 

@@ -15,10 +15,6 @@
 namespace outcore {
 namespace {
 
-uint64_t product(const std::array<uint32_t, 3>& r) {
-  return uint64_t{r[0]} * r[1] * r[2];
-}
-
 // A grid waiting to be made: its slot, box, level (the root's is 0) and
 // triangles.
 struct PendingGrid {
@@ -74,14 +70,14 @@ class Build {
     const uint64_t refs_left = HierarchicalGridBuilder::references_cap(n_) - (outstanding_ - count);
     resolution = UniformGridBuilder::resolution_for(pending.box, count, density(pending.level));
     while (true) {
-      if (product(resolution) <= cells_left) {
+      if (cell_count_of(resolution) <= cells_left) {
         pairs_.clear();
         if (file_triangles(GridLattice::over(pending.box, resolution), grid_.triangles, pending.triangles,
                            refs_left, pairs_)) {
           return;
         }
       }
-      assert(product(resolution) > 1);
+      assert(cell_count_of(resolution) > 1);
       UniformGridBuilder::coarsen(resolution);
     }
   }
@@ -99,7 +95,7 @@ class Build {
     for (int a = 0; a < 3; ++a) made.resolution[a] = static_cast<uint16_t>(resolution[a]);
     const GridLattice lattice = made.lattice();
     // Each cell's triangles, by a counting sort of the pairs.
-    const uint64_t cell_count = product(resolution);
+    const uint64_t cell_count = cell_count_of(resolution);
     starts_.clear();
     sorted_.clear();
     uint64_t scratch = append_cells(pairs_, cell_count, starts_, sorted_);

@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "core/accel/bvh/bvh_tree.h"
+#include "core/accel/triangle_hit_records.h"
 #include "core/geometry/aabb.h"
 #include "core/geometry/triangle.h"
 #include "core/util/status.h"
@@ -68,16 +69,7 @@ struct SplitTree {
 template <class Node>
 Status SplitTreeView<Node>::validate() const {
   const std::string name = Node::kTreeName;
-  if (records.size() != triangles.size()) {
-    return invalid_argument(name + ": " + std::to_string(records.size()) + " hit records for " +
-                            std::to_string(triangles.size()) + " triangles");
-  }
-  for (std::size_t k = 0; k < refs.size(); ++k) {
-    if (refs[k] >= triangles.size()) {
-      return invalid_argument(name + ": reference " + std::to_string(k) + " names triangle " +
-                              std::to_string(refs[k]) + " of " + std::to_string(triangles.size()));
-    }
-  }
+  OUTCORE_RETURN_IF_ERROR(validate_triangle_refs(name, refs, triangles, records));
   if (nodes.empty()) return Status::Ok();
   // Depth-first from the root; (node, depth) pending.
   std::vector<uint8_t> seen(nodes.size(), 0);

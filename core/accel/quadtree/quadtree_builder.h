@@ -4,13 +4,13 @@
 // above the depth limit, is cut into its four children and each triangle is
 // filed under the children whose column it may touch (bounds overlap in the
 // plane, and for a triangle whose bounds reach across both middles the
-// separating-axis test, core/geometry/triangle_box_overlap.h, on the column
-// grown by a tiny margin: conservative, a triangle is never left out of a
-// cell it touches). Each node records the extent along w of its triangles'
-// bounds. A node stays a leaf when its children would hold more than twice
-// its triangles (cells far smaller than the triangles), or when the tree
-// would exceed its reference or node budget, which bounds memory for the
-// cache's reservation.
+// column's separating axes, each edge crossed with w,
+// TriangleBoxOverlap::may_touch_overlapping_column in
+// core/geometry/triangle_box_overlap.h, on the column grown by a tiny
+// margin: conservative, a triangle is never left out of a cell it touches). Each node records the extent
+// along w of its triangles' bounds. A node stays a leaf when its children would hold more than twice its
+// triangles (cells far smaller than the triangles), or when the tree would exceed its reference or node
+// budget, which bounds memory for the cache's reservation.
 //
 // Thread-safety: build() is reentrant (no shared state).
 #pragma once
