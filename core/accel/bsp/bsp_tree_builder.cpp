@@ -10,7 +10,6 @@
 
 #include "core/accel/bsp/bsp_directions.h"
 #include "core/accel/bsp/bsp_polytope.h"
-#include "core/accel/triangle_hit_records.h"
 
 namespace outcore {
 namespace {
@@ -406,14 +405,10 @@ BspTreeBuilder::Result BspTreeBuilder::build(std::vector<Triangle> triangles,
   Result result;
   BspTree& tree = result.tree;
   if (triangles.empty()) return result;
-  tree.records = hit_records_for(triangles, ids);
-  tree.triangles = std::move(triangles);
+  tree.adopt_triangles(std::move(triangles), ids);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run();
-  // Exact capacities: memory_bytes() then equals a reloaded tree's.
-  tree.nodes.shrink_to_fit();
-  tree.refs.shrink_to_fit();
-  tree.triangles.shrink_to_fit();
+  tree.trim();
   return result;
 }
 

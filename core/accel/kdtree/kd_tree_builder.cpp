@@ -9,8 +9,6 @@
 #include <string>
 #include <utility>
 
-#include "core/accel/triangle_hit_records.h"
-
 namespace outcore {
 namespace {
 
@@ -387,15 +385,10 @@ KdTreeBuilder::Result KdTreeBuilder::build(std::vector<Triangle> triangles,
   KdTree& tree = result.tree;
   if (triangles.empty()) return result;
   for (const Triangle& tri : triangles) tree.bounds.extend(tri.bounds());
-  tree.records = hit_records_for(triangles, ids);
-  tree.triangles = std::move(triangles);
+  tree.adopt_triangles(std::move(triangles), ids);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run(tree.bounds);
-  // Exact capacities: memory_bytes() then equals a reloaded tree's (the
-  // subtree tier's accounting does not depend on where a brick came from).
-  tree.nodes.shrink_to_fit();
-  tree.refs.shrink_to_fit();
-  tree.triangles.shrink_to_fit();
+  tree.trim();
   return result;
 }
 

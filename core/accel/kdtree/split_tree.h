@@ -60,6 +60,20 @@ struct SplitTree {
   std::vector<BvhHitRecord> records;
 
   SplitTreeView<Node> view() const { return {bounds, nodes, refs, triangles, records}; }
+  // A builder's first step: keeps the brick's triangles (in input order)
+  // and their hit records (ids[k] belongs to triangles[k]).
+  void adopt_triangles(std::vector<Triangle> input, std::span<const TriangleId> ids) {
+    records = hit_records_for(input, ids);
+    triangles = std::move(input);
+  }
+  // A builder's last: exact capacities, so memory_bytes() equals a
+  // reloaded tree's (the subtree tier's accounting does not depend on
+  // where a brick came from).
+  void trim() {
+    nodes.shrink_to_fit();
+    refs.shrink_to_fit();
+    triangles.shrink_to_fit();
+  }
   uint64_t memory_bytes() const {
     return nodes.capacity() * sizeof(Node) + refs.capacity() * sizeof(uint32_t) +
            triangles.capacity() * sizeof(Triangle) + records.capacity() * sizeof(BvhHitRecord);

@@ -7,7 +7,6 @@
 #include <optional>
 #include <utility>
 
-#include "core/accel/triangle_hit_records.h"
 #include "core/geometry/triangle_box_overlap.h"
 
 namespace outcore {
@@ -144,14 +143,10 @@ OctreeBuilder::Result OctreeBuilder::build(std::vector<Triangle> triangles,
   Octree& tree = result.tree;
   if (triangles.empty()) return result;
   for (const Triangle& tri : triangles) tree.bounds.extend(tri.bounds());
-  tree.records = hit_records_for(triangles, ids);
-  tree.triangles = std::move(triangles);
+  tree.adopt_triangles(std::move(triangles), ids);
   Build build(tree.triangles, config, tree);
   result.peak_bytes = build.run();
-  // Exact capacities: memory_bytes() then equals a reloaded tree's.
-  tree.nodes.shrink_to_fit();
-  tree.refs.shrink_to_fit();
-  tree.triangles.shrink_to_fit();
+  tree.trim();
   return result;
 }
 
