@@ -347,41 +347,19 @@ TEST(UniformGrid, AViewThatDoesNotHoldTogetherIsAnError) {
 }
 
 TEST(UniformGrid, TheFactoryMakesItByNameAndRejectsBadOptions) {
-  auto builder = make_brick_builder("grid", {});
-  ASSERT_TRUE(builder.ok());
-  EXPECT_EQ((*builder)->name(), "grid");
-  EXPECT_TRUE(make_brick_builder("grid", {{"triangle_test", "double"},
-                                          {"resolution", "pbrt"},
-                                          {"cells_per_triangle", "3.5"},
-                                          {"max_resolution", "64"}})
-                  .ok());
-  for (const BrickAccelOptions& bad : std::vector<BrickAccelOptions>{{{"triangle_test", "exact"}},
-                                                                     {{"resolution", "cubic"}},
-                                                                     {{"cells_per_triangle", "0"}},
-                                                                     {{"cells_per_triangle", "17"}},
-                                                                     {{"max_resolution", "5000"}},
-                                                                     {{"max_depth", "8"}}}) {
-    const auto made = make_brick_builder("grid", bad);
-    ASSERT_FALSE(made.ok()) << bad.begin()->first;
-    EXPECT_NE(made.status().message().find(bad.begin()->first), std::string::npos) << made.status().message();
-  }
-  // Built through the factory, a brick answers as brute force and keeps
-  // within its reservation.
-  BrickData sphere = load_brick_from("gen:sphere?level=3");
-  const std::vector<Ray> rays = mixed_rays(sphere, 500, 31);
-  auto accel = (*builder)->build(BrickData(sphere));
-  ASSERT_TRUE(accel.ok());
-  EXPECT_LE((*accel)->memory_bytes(),
-            (*builder)->reserve_bytes(static_cast<uint32_t>(sphere.triangles.size())));
-  std::vector<Hit> got(rays.size());
-  (*accel)->intersect(all_ids(rays.size()), rays.data(), got.data());
-  const UniformGrid grid = build_grid(sphere);
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    Hit want;
-    bool any = false;
-    brute_force<WatertightTriangleTest>(grid.view(), rays[i], want, any);
-    EXPECT_EQ(std::memcmp(&want, &got[i], sizeof(Hit)), 0) << "ray " << i;
-  }
+  const BrickData sphere = load_brick_from("gen:sphere?level=3");
+  split_tree_test::expect_the_factory_makes("grid",
+                                            {{"triangle_test", "double"},
+                                             {"resolution", "pbrt"},
+                                             {"cells_per_triangle", "3.5"},
+                                             {"max_resolution", "64"}},
+                                            {{{"triangle_test", "exact"}},
+                                             {{"resolution", "cubic"}},
+                                             {{"cells_per_triangle", "0"}},
+                                             {{"cells_per_triangle", "17"}},
+                                             {{"max_resolution", "5000"}},
+                                             {{"max_depth", "8"}}},
+                                            sphere, build_grid(sphere), 50);
 }
 
 // The serialiser.

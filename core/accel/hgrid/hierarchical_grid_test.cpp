@@ -283,43 +283,23 @@ TEST(HierarchicalGrid, AViewThatDoesNotHoldTogetherIsAnError) {
 }
 
 TEST(HierarchicalGrid, TheFactoryMakesItByNameAndRejectsBadOptions) {
-  auto builder = make_brick_builder("hgrid", {});
-  ASSERT_TRUE(builder.ok());
-  EXPECT_EQ((*builder)->name(), "hgrid");
-  EXPECT_TRUE(make_brick_builder("hgrid", {{"triangle_test", "double"},
-                                           {"top_cells_per_triangle", "0.5"},
-                                           {"cells_per_triangle", "4"},
-                                           {"max_cell_triangles", "16"},
-                                           {"max_levels", "4"}})
-                  .ok());
-  for (const BrickAccelOptions& bad : std::vector<BrickAccelOptions>{{{"triangle_test", "exact"}},
-                                                                     {{"top_cells_per_triangle", "0"}},
-                                                                     {{"top_cells_per_triangle", "2"}},
-                                                                     {{"cells_per_triangle", "9"}},
-                                                                     {{"max_levels", "0"}},
-                                                                     {{"max_levels", "5"}},
-                                                                     {{"max_cell_triangles", "0"}},
-                                                                     {{"cells_per_triangle", "nan"}},
-                                                                     {{"max_depth", "4"}}}) {
-    const auto made = make_brick_builder("hgrid", bad);
-    ASSERT_FALSE(made.ok()) << bad.begin()->first;
-    EXPECT_NE(made.status().message().find(bad.begin()->first), std::string::npos) << made.status().message();
-  }
   const BrickData stadium = load_brick_from("gen:stadium?level=3");
-  auto accel = (*builder)->build(BrickData(stadium));
-  ASSERT_TRUE(accel.ok());
-  EXPECT_LE((*accel)->memory_bytes(),
-            (*builder)->reserve_bytes(static_cast<uint32_t>(stadium.triangles.size())));
-  const std::vector<Ray> rays = mixed_rays(stadium, 500, 31);
-  std::vector<Hit> got(rays.size());
-  (*accel)->intersect(all_ids(rays.size()), rays.data(), got.data());
-  const HierarchicalGrid grid = build_grid(stadium);
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    Hit want;
-    bool any = false;
-    brute_force<WatertightTriangleTest>(grid.view(), rays[i], want, any);
-    EXPECT_EQ(std::memcmp(&want, &got[i], sizeof(Hit)), 0) << "ray " << i;
-  }
+  split_tree_test::expect_the_factory_makes("hgrid",
+                                            {{"triangle_test", "double"},
+                                             {"top_cells_per_triangle", "0.5"},
+                                             {"cells_per_triangle", "4"},
+                                             {"max_cell_triangles", "16"},
+                                             {"max_levels", "4"}},
+                                            {{{"triangle_test", "exact"}},
+                                             {{"top_cells_per_triangle", "0"}},
+                                             {{"top_cells_per_triangle", "2"}},
+                                             {{"cells_per_triangle", "9"}},
+                                             {{"max_levels", "0"}},
+                                             {{"max_levels", "5"}},
+                                             {{"max_cell_triangles", "0"}},
+                                             {{"cells_per_triangle", "nan"}},
+                                             {{"max_depth", "4"}}},
+                                            stadium, build_grid(stadium), 50);
 }
 
 HgridBrickConfig config_with(TriangleTest test) {

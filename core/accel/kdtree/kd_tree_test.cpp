@@ -270,35 +270,14 @@ TEST(KdTree, AViewThatDoesNotHoldTogetherIsAnError) {
 }
 
 TEST(KdTree, TheFactoryMakesItByNameAndRejectsBadOptions) {
-  auto builder = make_brick_builder("kdtree", {});
-  ASSERT_TRUE(builder.ok());
-  EXPECT_EQ((*builder)->name(), "kdtree");
-  EXPECT_TRUE(make_brick_builder("kdtree", {{"triangle_test", "double"}, {"empty_bonus", "0.2"}}).ok());
-  for (const BrickAccelOptions& bad : std::vector<BrickAccelOptions>{{{"triangle_test", "exact"}},
-                                                                     {{"empty_bonus", "1"}},
-                                                                     {{"max_depth", "65"}},
-                                                                     {{"intersection_cost", "-1"}},
-                                                                     {{"bins", "8"}}}) {
-    const auto made = make_brick_builder("kdtree", bad);
-    ASSERT_FALSE(made.ok()) << bad.begin()->first;
-    EXPECT_NE(made.status().message().find(bad.begin()->first), std::string::npos) << made.status().message();
-  }
-  // Built through the factory, a brick answers as brute force.
-  BrickData sphere = load_brick_from("gen:sphere?level=3");
-  const std::vector<Ray> rays = mixed_rays(sphere, 500, 31);
-  auto accel = (*builder)->build(BrickData(sphere));
-  ASSERT_TRUE(accel.ok());
-  EXPECT_LE((*accel)->memory_bytes(),
-            (*builder)->reserve_bytes(static_cast<uint32_t>(sphere.triangles.size())));
-  std::vector<Hit> got(rays.size());
-  (*accel)->intersect(accel_test::all_ids(rays.size()), rays.data(), got.data());
-  const KdTree tree = build_tree(sphere);
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    Hit want;
-    bool any = false;
-    brute_force<WatertightTriangleTest>(tree.view(), rays[i], want, any);
-    EXPECT_EQ(std::memcmp(&want, &got[i], sizeof(Hit)), 0) << "ray " << i;
-  }
+  const BrickData sphere = load_brick_from("gen:sphere?level=3");
+  split_tree_test::expect_the_factory_makes("kdtree", {{"triangle_test", "double"}, {"empty_bonus", "0.2"}},
+                                            {{{"triangle_test", "exact"}},
+                                             {{"empty_bonus", "1"}},
+                                             {{"max_depth", "65"}},
+                                             {{"intersection_cost", "-1"}},
+                                             {{"bins", "8"}}},
+                                            sphere, build_tree(sphere), 50);
 }
 
 }  // namespace

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "core/accel/accel_test_util.h"
+#include "core/accel/brick_accel_factory.h"
 #include "core/accel/bvh/double_triangle_test.h"
 #include "core/accel/bvh/mt_triangle_test.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
@@ -111,6 +112,44 @@ inline std::vector<Ray> mixed_rays(const BrickData& brick, std::size_t n, uint64
     if (i % 13 == 6) rays[i].tnear = -0.5f * length(b.extent());
   }
   return rays;
+}
+
+// A structure through the factory: `name` made with no options (and named
+// so) and with the options in `good`; each option set in `bad` refused
+// with an error naming its key; a brick built through it stays within its
+// reservation and answers 500 mixed rays bitwise as brute force with the
+// watertight test over `tree` (the same structure built directly from
+// `brick`), at least min_hits of them hits.
+template <class Tree>
+void expect_the_factory_makes(const std::string& name, const BrickAccelOptions& good,
+                              const std::vector<BrickAccelOptions>& bad, const BrickData& brick,
+                              const Tree& tree, std::size_t min_hits) {
+  auto builder = make_brick_builder(name, {});
+  ASSERT_TRUE(builder.ok()) << builder.status().to_string();
+  EXPECT_EQ((*builder)->name(), name);
+  EXPECT_TRUE(make_brick_builder(name, good).ok());
+  for (const BrickAccelOptions& options : bad) {
+    const auto made = make_brick_builder(name, options);
+    ASSERT_FALSE(made.ok()) << options.begin()->first;
+    EXPECT_NE(made.status().message().find(options.begin()->first), std::string::npos)
+        << made.status().message();
+  }
+  auto accel = (*builder)->build(BrickData(brick));
+  ASSERT_TRUE(accel.ok()) << accel.status().to_string();
+  EXPECT_LE((*accel)->memory_bytes(),
+            (*builder)->reserve_bytes(static_cast<uint32_t>(brick.triangles.size())));
+  const std::vector<Ray> rays = mixed_rays(brick, 500, 31);
+  std::vector<Hit> got(rays.size());
+  (*accel)->intersect(accel_test::all_ids(rays.size()), rays.data(), got.data());
+  std::size_t hits = 0;
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    Hit want;
+    bool any = false;
+    brute_force<WatertightTriangleTest>(tree.view(), rays[i], want, any);
+    hits += want.is_hit();
+    EXPECT_EQ(std::memcmp(&want, &got[i], sizeof(Hit)), 0) << name << " ray " << i;
+  }
+  EXPECT_GE(hits, min_hits) << name;
 }
 
 // Every triangle test, bitwise against brute force, on the scenes every

@@ -203,36 +203,15 @@ TEST(Octree, AViewThatDoesNotHoldTogetherIsAnError) {
 }
 
 TEST(Octree, TheFactoryMakesItByNameAndRejectsBadOptions) {
-  auto builder = make_brick_builder("octree", {});
-  ASSERT_TRUE(builder.ok());
-  EXPECT_EQ((*builder)->name(), "octree");
-  EXPECT_TRUE(
-      make_brick_builder("octree", {{"triangle_test", "double"}, {"max_leaf_size", "4"}, {"max_depth", "12"}})
-          .ok());
-  for (const BrickAccelOptions& bad : std::vector<BrickAccelOptions>{{{"triangle_test", "exact"}},
-                                                                     {{"max_leaf_size", "0"}},
-                                                                     {{"max_depth", "24"}},
-                                                                     {{"max_depth", "deep"}},
-                                                                     {{"cells_per_triangle", "2"}}}) {
-    const auto made = make_brick_builder("octree", bad);
-    ASSERT_FALSE(made.ok()) << bad.begin()->first;
-    EXPECT_NE(made.status().message().find(bad.begin()->first), std::string::npos) << made.status().message();
-  }
-  BrickData sphere = load_brick_from("gen:sphere?level=3");
-  const std::vector<Ray> rays = mixed_rays(sphere, 500, 31);
-  auto accel = (*builder)->build(BrickData(sphere));
-  ASSERT_TRUE(accel.ok());
-  EXPECT_LE((*accel)->memory_bytes(),
-            (*builder)->reserve_bytes(static_cast<uint32_t>(sphere.triangles.size())));
-  std::vector<Hit> got(rays.size());
-  (*accel)->intersect(all_ids(rays.size()), rays.data(), got.data());
-  const Octree tree = build_tree(sphere);
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    Hit want;
-    bool any = false;
-    brute_force<WatertightTriangleTest>(tree.view(), rays[i], want, any);
-    EXPECT_EQ(std::memcmp(&want, &got[i], sizeof(Hit)), 0) << "ray " << i;
-  }
+  const BrickData sphere = load_brick_from("gen:sphere?level=3");
+  split_tree_test::expect_the_factory_makes(
+      "octree", {{"triangle_test", "double"}, {"max_leaf_size", "4"}, {"max_depth", "12"}},
+      {{{"triangle_test", "exact"}},
+       {{"max_leaf_size", "0"}},
+       {{"max_depth", "24"}},
+       {{"max_depth", "deep"}},
+       {{"cells_per_triangle", "2"}}},
+      sphere, build_tree(sphere), 50);
 }
 
 }  // namespace

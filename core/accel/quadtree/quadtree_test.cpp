@@ -298,39 +298,15 @@ TEST(Quadtree, AViewThatDoesNotHoldTogetherIsAnError) {
 }
 
 TEST(Quadtree, TheFactoryMakesItByNameAndRejectsBadOptions) {
-  auto builder = make_brick_builder("quadtree", {});
-  ASSERT_TRUE(builder.ok());
-  EXPECT_EQ((*builder)->name(), "quadtree");
-  EXPECT_TRUE(make_brick_builder("quadtree",
-                                 {{"triangle_test", "double"}, {"max_leaf_size", "4"}, {"max_depth", "12"}})
-                  .ok());
-  for (const BrickAccelOptions& bad : std::vector<BrickAccelOptions>{{{"triangle_test", "exact"}},
-                                                                     {{"max_leaf_size", "0"}},
-                                                                     {{"max_depth", "24"}},
-                                                                     {{"max_depth", "deep"}},
-                                                                     {{"cells_per_triangle", "2"}}}) {
-    const auto made = make_brick_builder("quadtree", bad);
-    ASSERT_FALSE(made.ok()) << bad.begin()->first;
-    EXPECT_NE(made.status().message().find(bad.begin()->first), std::string::npos) << made.status().message();
-  }
-  BrickData terrain = load_brick_from("gen:terrain?n=30&size=10&height=1");
-  const std::vector<Ray> rays = mixed_rays(terrain, 500, 31);
-  auto accel = (*builder)->build(BrickData(terrain));
-  ASSERT_TRUE(accel.ok());
-  EXPECT_LE((*accel)->memory_bytes(),
-            (*builder)->reserve_bytes(static_cast<uint32_t>(terrain.triangles.size())));
-  std::vector<Hit> got(rays.size());
-  (*accel)->intersect(all_ids(rays.size()), rays.data(), got.data());
-  const Quadtree tree = build_tree(terrain);
-  std::size_t hits = 0;
-  for (std::size_t i = 0; i < rays.size(); ++i) {
-    Hit want;
-    bool any = false;
-    brute_force<WatertightTriangleTest>(tree.view(), rays[i], want, any);
-    hits += want.is_hit();
-    EXPECT_EQ(std::memcmp(&want, &got[i], sizeof(Hit)), 0) << "ray " << i;
-  }
-  EXPECT_GT(hits, 50u);
+  const BrickData terrain = load_brick_from("gen:terrain?n=30&size=10&height=1");
+  split_tree_test::expect_the_factory_makes(
+      "quadtree", {{"triangle_test", "double"}, {"max_leaf_size", "4"}, {"max_depth", "12"}},
+      {{{"triangle_test", "exact"}},
+       {{"max_leaf_size", "0"}},
+       {{"max_depth", "24"}},
+       {{"max_depth", "deep"}},
+       {{"cells_per_triangle", "2"}}},
+      terrain, build_tree(terrain), 51);  // more than 50
 }
 
 }  // namespace
