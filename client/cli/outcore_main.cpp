@@ -26,6 +26,7 @@ int main(int argc, char** argv) {
   outcore::add_trace_command(app, exit_code);
   outcore::add_stress_command(app, exit_code);
   outcore::add_cache_sim_command(app, exit_code);
+  outcore::add_calibrate_command(app, exit_code);
   outcore::add_serve_command(app, exit_code);
   outcore::add_query_command(app, exit_code);
   CLI11_PARSE(app, argc, argv);

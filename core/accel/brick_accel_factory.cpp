@@ -1,8 +1,10 @@
 #include "core/accel/brick_accel_factory.h"
 
 #include <cmath>
+#include <iterator>
 #include <string>
 
+#include "core/accel/auto/auto_brick.h"
 #include "core/accel/bsp/bsp_brick.h"
 #include "core/accel/bvh/bvh_brick.h"
 #include "core/accel/embree_brick.h"
@@ -207,10 +209,18 @@ constexpr BrickStructureEntry kBrickStructures[] = {
     {"kdtree", make_kdtree_builder},       {"bsp", make_bsp_builder},
     {"grid", make_grid_builder},           {"hgrid", make_hgrid_builder},
     {"octree", make_octree_builder},       {"quadtree", make_quadtree_builder},
-    {"reference", make_reference_builder},
+    {"reference", make_reference_builder}, {"auto", make_auto_builder},
 };
+static_assert(std::size(kBrickStructures) <= kMaxBrickStructures);
 
 }  // namespace
+
+std::size_t brick_structure_index(std::string_view name) {
+  for (std::size_t i = 0; i < std::size(kBrickStructures); ++i) {
+    if (name == kBrickStructures[i].name) return i;
+  }
+  return kMaxBrickStructures;
+}
 
 std::vector<std::string> brick_accel_names() {
   std::vector<std::string> names;

@@ -1,5 +1,5 @@
 // Creates brick structures by name ("embree", "bvh", "kdtree", "bsp", "grid", "hgrid",
-// "octree", "quadtree", "reference") with options
+// "octree", "quadtree", "reference", "auto") with options
 // given as key=value strings; unknown names and unknown or malformed options
 // are errors, never ignored. The returned BrickBuilder turns a loaded brick into
 // a BrickAccel.
@@ -11,6 +11,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/accel/brick_accel.h"
@@ -22,11 +23,37 @@
 
 namespace outcore {
 
+// What the engine knows of a brick's use when it asks the cache for it
+// (BrickCache::acquire): for builders that choose a structure per brick.
+struct BuildDemand {
+  // Rays the caller traces in the brick with this acquisition (0: unknown).
+  uint64_t rays_now = 0;
+  // Rays the brick is expected to serve while built: those it has served
+  // since the cache was made, this acquisition's included (past use is the
+  // guess at future use; 0: unknown).
+  uint64_t rays_expected = 0;
+};
+
 class BrickBuilder {
  public:
   virtual ~BrickBuilder() = default;
   // Consumes the brick's data (the accel may keep its buffers).
   virtual Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const = 0;
+  // build() for a brick with this demand; a builder that chooses a structure
+  // per brick (auto) uses it, the others ignore it.
+  virtual Expected<std::unique_ptr<BrickAccel>> build_for(BrickData&& brick,
+                                                          const BuildDemand& /*demand*/) const {
+    return build(std::move(brick));
+  }
+  // Whether `accel` (made by this builder) should be built again for
+  // `demand`, a better structure paying for its build (auto's lazy
+  // refinement). Called under the cache's lock: cheap, no I/O.
+  virtual bool worth_rebuilding(const BrickAccel& /*accel*/, const BuildDemand& /*demand*/) const {
+    return false;
+  }
+  // The structure (a brick_accel_names() name) `accel`, made by this
+  // builder, is: name() unless the builder chooses per brick.
+  virtual std::string_view structure_of(const BrickAccel& /*accel*/) const { return name(); }
   // An upper bound on memory_bytes() of the accel build() would return for
   // a brick of this many triangles, including the transient peak during the
   // build; the cache reserves it before building so it never overruns its budget.
@@ -71,11 +98,17 @@ inline constexpr const char* kDefaultBrickAccel = "bvh";
 // max_cell_triangles, max_levels: HierarchicalGridBuilder::Config); "octree" (options:
 // triangle_test as bvh; max_leaf_size, max_depth: OctreeBuilder::Config);
 // "quadtree" (options as octree: QuadtreeBuilder::Config); "reference" (no
-// options:
-// float64 brute force per brick, reference_brick.h).
+// options: float64 brute force per brick, reference_brick.h); "auto" (options:
+// candidates=a,b,... among bvh, kdtree, bsp, grid, hgrid, octree, quadtree;
+// triangle_test, given to each; profile=FILE: the cost profile; per brick the
+// candidate of least predicted cost: core/accel/auto/auto_brick.h).
 Expected<std::unique_ptr<BrickBuilder>> make_brick_builder(const std::string& name,
                                                            const BrickAccelOptions& options);
 std::vector<std::string> brick_accel_names();
+// At most this many names (the cache counts builds per structure in an array).
+inline constexpr std::size_t kMaxBrickStructures = 12;
+// `name`'s position in brick_accel_names(), or kMaxBrickStructures when unknown.
+std::size_t brick_structure_index(std::string_view name);
 // "key=value key=value" in key order, or "defaults" when empty (for logs).
 std::string describe_accel_options(const BrickAccelOptions& options);
 

@@ -7,12 +7,16 @@
 #include <string_view>
 #include <utility>
 
+#include "core/accel/brick_accel_factory.h"
 #include "core/io/text_line_reader.h"
 
 namespace outcore {
 namespace {
 
-constexpr const char* kColumns = "seq,brick,bytes,reserved_bytes,build_seconds,outcome";
+constexpr const char* kColumns = "seq,brick,bytes,reserved_bytes,build_seconds,outcome,structure,rays";
+// Versions 1 and 2 had no structure and rays.
+constexpr const char* kColumnsBefore3 = "seq,brick,bytes,reserved_bytes,build_seconds,outcome";
+constexpr std::size_t kMaxFields = 8;
 constexpr std::size_t kFileBuffer = std::size_t{1} << 20;
 
 template <class T>
@@ -86,9 +90,10 @@ void AccessTraceWriter::write_locked(const std::vector<AccessRecord>& chunk) {
       for (const uint32_t b : r.hint) std::fprintf(file_, " %u", b);
       std::fputc('\n', file_);
     }
-    std::fprintf(file_, "%llu,%u,%llu,%llu,%.17g,%s\n", static_cast<unsigned long long>(r.seq), r.brick,
+    std::fprintf(file_, "%llu,%u,%llu,%llu,%.17g,%s,%s,%llu\n", static_cast<unsigned long long>(r.seq), r.brick,
                  static_cast<unsigned long long>(r.bytes), static_cast<unsigned long long>(r.reserved_bytes),
-                 r.build_seconds, access_outcome_name(r.outcome));
+                 r.build_seconds, access_outcome_name(r.outcome), r.structure.c_str(),
+                 static_cast<unsigned long long>(r.rays));
   }
   written_ += chunk.size();
 }
@@ -158,8 +163,8 @@ class TraceReader {
   Status read_version(std::string_view body);
   Status read_hint(std::string_view value);
   Status read_record(std::string_view line);
-  // The six comma-separated fields of a record line.
-  Status split_fields(std::string_view line, std::string_view (&fields)[6]) const;
+  // The comma-separated fields of a record line (6 before version 3, else 8).
+  Status split_fields(std::string_view line, std::string_view (&fields)[kMaxFields]) const;
   // Each term is checked before the sum, so neither it nor the sum wraps.
   Status add_bytes(const char* name, uint64_t value);
 
@@ -167,6 +172,7 @@ class TraceReader {
   TextLineReader reader_;
   AccessTrace trace_;
   bool saw_version_ = false, saw_columns_ = false;
+  int version_ = 0;
   bool has_pending_hint_ = false;
   std::vector<uint32_t> pending_hint_;
   uint64_t total_bytes_ = 0;  // of every record's bytes and reserved_bytes, <= kMaxTraceBytes
@@ -190,8 +196,9 @@ Status TraceReader::read_line(std::string_view line) {
   if (!saw_version_)
     return invalid_argument(where() + "not an outcore access trace (no '# outcore brick access trace' line)");
   if (!saw_columns_) {
-    if (line != kColumns)
-      return invalid_argument(where() + "expected the column line '" + std::string(kColumns) + "'");
+    const char* columns = version_ >= 3 ? kColumns : kColumnsBefore3;
+    if (line != columns)
+      return invalid_argument(where() + "expected the column line '" + std::string(columns) + "'");
     saw_columns_ = true;
     return Status::Ok();
   }
@@ -203,9 +210,8 @@ Status TraceReader::read_version(std::string_view body) {
   if (body.substr(0, kPrefix.size()) != kPrefix)
     return invalid_argument(where() + "not an outcore access trace (the first line must be '# " +
                             std::string(kPrefix) + std::to_string(kAccessTraceVersion) + "')");
-  int version = 0;
-  if (!parse_unsigned(body.substr(kPrefix.size()), version) || version < kOldestAccessTraceVersion ||
-      version > kAccessTraceVersion)
+  if (!parse_unsigned(body.substr(kPrefix.size()), version_) || version_ < kOldestAccessTraceVersion ||
+      version_ > kAccessTraceVersion)
     return failed_precondition(where() + "access trace version '" + std::string(body.substr(kPrefix.size())) +
                                "' is not supported (this build reads versions " +
                                std::to_string(kOldestAccessTraceVersion) + " to " +
@@ -252,18 +258,21 @@ Status TraceReader::read_hint(std::string_view value) {
   return Status::Ok();
 }
 
-Status TraceReader::split_fields(std::string_view line, std::string_view (&fields)[6]) const {
+Status TraceReader::split_fields(std::string_view line, std::string_view (&fields)[kMaxFields]) const {
+  const std::size_t expected = version_ >= 3 ? 8 : 6;
   std::size_t count = 0;
   for (std::string_view rest = line;; ++count) {
     const auto comma = rest.find(',');
-    if (count < 6) fields[count] = rest.substr(0, comma);
+    if (count < kMaxFields) fields[count] = rest.substr(0, comma);
     if (comma == std::string_view::npos) {
       ++count;
       break;
     }
     rest.remove_prefix(comma + 1);
   }
-  if (count != 6) return invalid_argument(where() + "expected 6 fields, found " + std::to_string(count));
+  if (count != expected)
+    return invalid_argument(where() + "expected " + std::to_string(expected) + " fields, found " +
+                            std::to_string(count));
   return Status::Ok();
 }
 
@@ -279,7 +288,7 @@ Status TraceReader::add_bytes(const char* name, uint64_t value) {
 }
 
 Status TraceReader::read_record(std::string_view line) {
-  std::string_view fields[6];
+  std::string_view fields[kMaxFields];
   OUTCORE_RETURN_IF_ERROR(split_fields(line, fields));
   AccessRecord r;
   if (!parse_unsigned(fields[0], r.seq))
@@ -301,6 +310,13 @@ Status TraceReader::read_record(std::string_view line) {
   if (!parse_outcome(fields[5], r.outcome))
     return invalid_argument(where() + "outcome '" + std::string(fields[5]) +
                             "' is not hit, miss, wait or load");
+  if (version_ >= 3) {
+    r.structure = fields[6];
+    if (!r.structure.empty() && brick_structure_index(r.structure) == kMaxBrickStructures)
+      return invalid_argument(where() + "structure '" + r.structure + "' is not a brick structure");
+    if (!parse_unsigned(fields[7], r.rays))
+      return invalid_argument(where() + "bad rays '" + std::string(fields[7]) + "'");
+  }
   if (trace_.info.bricks != 0 && r.brick >= trace_.info.bricks)
     return invalid_argument(where() + "brick " + std::to_string(r.brick) + " is beyond the trace's " +
                             std::to_string(trace_.info.bricks) + " bricks");

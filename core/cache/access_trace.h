@@ -2,17 +2,17 @@
 // BrickCache, in the order the cache served them, for offline replay
 // (cache_simulator.h, `outcore cache-sim`).
 //
-// File format (CSV, version 2), chosen to be read by people and by pandas:
+// File format (CSV, version 3), chosen to be read by people and by pandas:
 //
-//   # outcore brick access trace, version 2
+//   # outcore brick access trace, version 3
 //   # policy: lru
 //   # budget_bytes: 67108864
 //   # builder: embree
 //   # bricks: 640
 //   # source: trace scene.oc rays.npy
-//   seq,brick,bytes,reserved_bytes,build_seconds,outcome
-//   0,17,1433600,2097152,0.00231,miss
-//   1,17,1433600,2097152,0,hit
+//   seq,brick,bytes,reserved_bytes,build_seconds,outcome,structure,rays
+//   0,17,1433600,2097152,0.00231,miss,grid,40
+//   1,17,1433600,2097152,0,hit,grid,512
 //
 // The first line names the version; other "# key: value" lines are metadata
 // (all optional); the column line is required. seq counts records from 0 in
@@ -26,7 +26,11 @@
 // brick), load (this request loaded it from the subtree tier instead of
 // building it; subtree_tier.h), hit (it was ready), wait (it was being built
 // by another thread and this request waited for that build). Version 2 added
-// "load"; version 1 files (which have none) are read too.
+// "load"; version 3 added structure (the brick's structure: the builder's,
+// or with --brick-accel auto the one it chose) and rays (how many rays the
+// acquisition was for, what auto chooses by; 0 when the engine does not
+// know, e.g. bricks pinned for a whole in-cache sweep). Versions 1 and 2
+// (without these columns) are read too.
 // Failed acquisitions are not recorded. A line "# hint: 12 7 40" (brick ids,
 // soonest first; possibly none) before a record is the schedule hint the
 // engine gave the policy before that request (schedule-aware policies use
@@ -64,6 +68,11 @@ struct AccessRecord {
   uint64_t reserved_bytes = 0;
   double build_seconds = 0;
   AccessOutcome outcome = AccessOutcome::kHit;
+  // The brick's structure (a brick_accel_names() name; with auto, the chosen
+  // one; empty in traces before version 3) and the rays the acquisition was
+  // for (BrickCache::acquire; 0 when not known or before version 3).
+  std::string structure;
+  uint64_t rays = 0;
   // The schedule hint the cache's policy was given just before this request
   // (EvictionPolicy::on_schedule_hint), when there was one since the last
   // request; a replay hands it to the policy at the same point.
@@ -85,7 +94,7 @@ struct AccessTrace {
   std::vector<AccessRecord> records;
 };
 
-inline constexpr int kAccessTraceVersion = 2;
+inline constexpr int kAccessTraceVersion = 3;
 // The most bytes a trace's records may count in all (see above), and the
 // largest cache budget a replay accepts.
 inline constexpr uint64_t kMaxTraceBytes = uint64_t{1} << 62;

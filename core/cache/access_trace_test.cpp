@@ -97,7 +97,7 @@ TEST(AccessTraceTest, MalformedFilesAreErrorsNamingFileAndLine) {
   const std::vector<Case> cases = {
       {"", "empty file"},
       {"hello\n", ":1: not an outcore access trace"},
-      {"# outcore brick access trace, version 3\n", ":1: access trace version '3' is not supported"},
+      {"# outcore brick access trace, version 4\n", ":1: access trace version '4' is not supported"},
       {"# outcore brick access trace, version 1\n0,1,2,3,0,hit\n", ":2: expected the column line"},
       {header + "0,1,100,100,0,hit\n1,1,100,100,0,maybe\n", ":4: outcome 'maybe'"},
       {header + "0,1,100,100,0\n", ":3: expected 6 fields, found 5"},

@@ -21,19 +21,22 @@ namespace {
 // builds it. Every failure, including an exception from the builder, comes
 // back as a Status naming the brick, so the caller can always undo its
 // reservation.
+// A tier file whose structure the builder would rebuild for `demand` is not
+// used (it is replaced by the new build).
 Expected<std::unique_ptr<BrickAccel>> load_and_build(const SceneStore& store, const BrickBuilder& builder,
-                                                     SubtreeTier* tier, const SubtreeKey& key, bool& loaded) {
+                                                     SubtreeTier* tier, const SubtreeKey& key,
+                                                     const BuildDemand& demand, bool& loaded) {
   const uint32_t id = key.brick_id;
   const std::string brick = "brick " + std::to_string(id);
   try {
     if (tier != nullptr) {
       std::unique_ptr<BrickAccel> accel = tier->load(key);
-      loaded = accel != nullptr;
+      loaded = accel != nullptr && !builder.worth_rebuilding(*accel, demand);
       if (loaded) return accel;
     }
     BrickData data;
     OUTCORE_RETURN_IF_ERROR(store.load_brick(id, data));  // names the brick
-    Expected<std::unique_ptr<BrickAccel>> built = builder.build(std::move(data));
+    Expected<std::unique_ptr<BrickAccel>> built = builder.build_for(std::move(data), demand);
     if (!built.ok())
       return built.status().with_context("building " + brick + " with '" + builder.name() + "'");
     if (*built == nullptr)
@@ -104,7 +107,7 @@ Status BrickCache::too_large(uint32_t brick_id, uint64_t reservation) const {
                             "; raise the budget or repack with smaller bricks");
 }
 
-Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
+Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays) {
   if (brick_id >= entries_.size()) {
     // The same code and words as SceneStore::load_brick for the same mistake.
     return out_of_range("brick " + std::to_string(brick_id) + " does not exist (the scene has " +
@@ -116,8 +119,17 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   Entry& entry = entries_[brick_id];
 
   std::unique_lock lock(mutex_);
+  entry.rays_served += rays;
+  BuildDemand demand{rays, entry.rays_served};
   bool waited = false;
   while (entry.state != State::kAbsent) {
+    if (entry.state == State::kReady && entry.rays_served > 0 && entry.pins == 0 &&
+        builder_->worth_rebuilding(*entry.accel, demand)) {
+      std::vector<std::unique_ptr<BrickAccel>> victims;
+      const uint64_t freed = take_for_rebuild(brick_id, victims);
+      release_victims(victims, freed, lock);
+      continue;  // absent now, unless another thread began building it
+    }
     if (entry.state == State::kReady) {
       ++entry.pins;
       policy_->on_access(brick_id);
@@ -129,7 +141,7 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
       pin.was_hit_ = !waited;
       if (trace_) {
         auto chunk = record_access(brick_id, entry.bytes, reservation, 0.0,
-                                   waited ? AccessOutcome::kWait : AccessOutcome::kHit);
+                                   waited ? AccessOutcome::kWait : AccessOutcome::kHit, rays);
         lock.unlock();
         hand_over(std::move(chunk));
       }
@@ -153,13 +165,15 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   }
   entry.bytes = reservation;
   account(static_cast<int64_t>(reservation));
+  demand.rays_expected = entry.rays_served;
   lock.unlock();
 
   // Load from the tier, or load and build, outside the lock.
   const auto start = std::chrono::steady_clock::now();
   const SubtreeKey key = subtree_key(brick_id);
   bool loaded = false;
-  Expected<std::unique_ptr<BrickAccel>> built = load_and_build(*store_, *builder_, tier_.get(), key, loaded);
+  Expected<std::unique_ptr<BrickAccel>> built =
+      load_and_build(*store_, *builder_, tier_.get(), key, demand, loaded);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   if (!built.ok()) {
@@ -197,6 +211,8 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   ++counters_.resident_bricks;
   if (!loaded) {
     ++counters_.builds;
+    const std::size_t structure = brick_structure_index(builder_->structure_of(*entry.accel));
+    if (structure < kMaxBrickStructures) ++counters_.builds_by_structure[structure];
     counters_.bytes_built += bytes;
     counters_.build_seconds += seconds;
   }
@@ -209,7 +225,7 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id) {
   std::vector<AccessRecord> chunk;
   if (trace_) {
     chunk = record_access(brick_id, bytes, reservation, seconds,
-                          loaded ? AccessOutcome::kLoad : AccessOutcome::kMiss);
+                          loaded ? AccessOutcome::kLoad : AccessOutcome::kMiss, rays);
   }
   lock.unlock();
   changed_.notify_all();
@@ -297,6 +313,18 @@ void BrickCache::release_victims(std::vector<std::unique_ptr<BrickAccel>>& victi
   changed_.notify_all();
 }
 
+uint64_t BrickCache::take_for_rebuild(uint32_t brick_id, std::vector<std::unique_ptr<BrickAccel>>& victims) {
+  Entry& entry = entries_[brick_id];
+  assert(entry.state == State::kReady && entry.pins == 0);
+  policy_->on_erase(brick_id);
+  const uint64_t bytes = std::exchange(entry.bytes, 0);
+  entry.state = State::kAbsent;
+  victims.push_back(std::move(entry.accel));
+  ++counters_.rebuilds;
+  --counters_.resident_bricks;
+  return bytes;
+}
+
 void BrickCache::unpin(uint32_t brick_id) {
   {
     std::lock_guard lock(mutex_);
@@ -323,7 +351,7 @@ void BrickCache::set_access_trace(std::shared_ptr<AccessTraceWriter> trace) {
 }
 
 std::vector<AccessRecord> BrickCache::record_access(uint32_t brick, uint64_t bytes, uint64_t reserved,
-                                                    double seconds, AccessOutcome outcome) {
+                                                    double seconds, AccessOutcome outcome, uint64_t rays) {
   // Records are handed over in chunks so the writer's lock and the file are
   // touched once per kChunk acquisitions, never under the cache's lock.
   constexpr std::size_t kChunk = 4096;
@@ -335,6 +363,9 @@ std::vector<AccessRecord> BrickCache::record_access(uint32_t brick, uint64_t byt
   record.reserved_bytes = reserved;
   record.build_seconds = seconds;
   record.outcome = outcome;
+  record.rays = rays;
+  const Entry& entry = entries_[brick];
+  if (entry.accel) record.structure = builder_->structure_of(*entry.accel);
   if (has_pending_hint_) {
     record.has_hint = true;
     record.hint = std::exchange(pending_hint_, {});
@@ -383,6 +414,12 @@ std::vector<uint32_t> BrickCache::resident_bricks() const {
     if (entries_[b].state == State::kReady) out.push_back(b);
   }
   return out;
+}
+
+void BrickCache::add_rays_served(std::span<const uint64_t> rays_by_brick) {
+  std::lock_guard lock(mutex_);
+  const std::size_t bricks = std::min(rays_by_brick.size(), entries_.size());
+  for (std::size_t b = 0; b < bricks; ++b) entries_[b].rays_served += rays_by_brick[b];
 }
 
 bool BrickCache::is_resident(uint32_t brick_id) const {

@@ -41,6 +41,7 @@
 // not held while loading or building.
 #pragma once
 
+#include <array>
 #include <condition_variable>
 #include <cstdint>
 #include <memory>
@@ -69,6 +70,11 @@ struct CacheCounters {
   // Builds whose true bytes exceeded BrickBuilder::reserve_bytes (a builder
   // bug; each is logged). Only these can push accounted bytes past the budget.
   uint64_t reservation_overruns = 0;
+  // Builds by structure (brick_accel_names() order; with auto, the chosen
+  // candidate), and bricks rebuilt as another structure because their rays
+  // paid for it (BrickBuilder::worth_rebuilding; each is also a build).
+  std::array<uint64_t, kMaxBrickStructures> builds_by_structure{};
+  uint64_t rebuilds = 0;
   // The subtree tier's own counters (all zero without a tier): loads, writes,
   // rejections by reason, bytes and seconds.
   SubtreeTierCounters subtree;
@@ -108,7 +114,16 @@ class BrickCache {
   BrickCache(const BrickCache&) = delete;
   BrickCache& operator=(const BrickCache&) = delete;
 
-  Expected<PinnedBrick> acquire(uint32_t brick_id);
+  // `rays`: how many rays the caller will trace in the brick with this pin
+  // (0: not known). The cache sums them per brick (kept across evictions)
+  // as the brick's expected use: a builder that chooses per brick
+  // (BuildDemand) builds for it, and a ready, unpinned brick its builder
+  // finds worth rebuilding for it is built again (counted in rebuilds and
+  // builds, not in evictions).
+  Expected<PinnedBrick> acquire(uint32_t brick_id, uint64_t rays = 0);
+  // Adds rays traced in bricks under pins acquired without a count
+  // (rays_by_brick[b] for brick b; one lock for all) to their expected use.
+  void add_rays_served(std::span<const uint64_t> rays_by_brick);
   bool is_resident(uint32_t brick_id) const;
   CacheCounters counters() const;
   uint64_t budget_bytes() const { return budget_bytes_; }
@@ -146,10 +161,14 @@ class BrickCache {
     State state = State::kAbsent;
     uint32_t pins = 0;
     uint64_t bytes = 0;  // accounted (a reservation while building)
+    uint64_t rays_served = 0;  // the acquisitions' rays, summed over the cache's life
     std::unique_ptr<BrickAccel> accel;
   };
 
   void unpin(uint32_t brick_id);
+  // Under the lock: takes a ready, unpinned brick out to be built again
+  // (the accel into `victims`, its bytes returned, still accounted).
+  uint64_t take_for_rebuild(uint32_t brick_id, std::vector<std::unique_ptr<BrickAccel>>& victims);
   // Evicts unpinned ready bricks until `bytes` more fit, waiting for unpins and
   // builds when everything left is pinned or building; false if it cannot
   // (`bytes` is more than the whole budget).
@@ -166,7 +185,7 @@ class BrickCache {
   // Under the lock: appends a record; returns a full chunk to hand to the
   // writer once the lock is released (empty otherwise).
   std::vector<AccessRecord> record_access(uint32_t brick, uint64_t bytes, uint64_t reserved, double seconds,
-                                          AccessOutcome outcome);
+                                          AccessOutcome outcome, uint64_t rays);
   void hand_over(std::vector<AccessRecord> chunk);
   Status too_large(uint32_t brick_id, uint64_t reservation) const;
   SubtreeKey subtree_key(uint32_t brick_id) const;

@@ -18,6 +18,7 @@ void add_info_command(CLI::App& app, int& exit_code);
 void add_trace_command(CLI::App& app, int& exit_code);
 void add_stress_command(CLI::App& app, int& exit_code);
 void add_cache_sim_command(CLI::App& app, int& exit_code);
+void add_calibrate_command(CLI::App& app, int& exit_code);
 
 // Prints "outcore <command>: error: <message>" on stderr and returns 1.
 int report_command_error(const char* command, const std::string& message);

@@ -64,8 +64,18 @@ Status apply_brick_structure_choices(const EngineCliOptions& cli, EngineOptions&
       return invalid_argument("--triangle-test and --accel-opt triangle_test=... both given");
     }
   }
+  if (!cli.profile.empty()) {
+    if (cli.brick_accel != "auto") {
+      return invalid_argument("--profile is the cost profile of --brick-accel auto (got '" + cli.brick_accel +
+                              "')");
+    }
+    if (!options.accel_options.emplace("profile", cli.profile).second) {
+      return invalid_argument("--profile and --accel-opt profile=... both given");
+    }
+  }
   if (cli.reference) {
-    if (cli.brick_accel != kDefaultBrickAccel || !cli.accel_options.empty() || !cli.triangle_test.empty()) {
+    if (cli.brick_accel != kDefaultBrickAccel || !cli.accel_options.empty() || !cli.triangle_test.empty() ||
+        !cli.profile.empty()) {
       return invalid_argument(
           "--reference chooses the brick structure itself: drop --brick-accel, --accel-opt and "
           "--triangle-test");
@@ -85,6 +95,10 @@ void add_cache_options(CLI::App& command, EngineCliOptions& options) {
       ->capture_default_str();
   command.add_option("--policy", options.policy, "Cache eviction policy")->capture_default_str();
   command.add_option("--brick-accel", options.brick_accel, "Brick structure")->capture_default_str();
+  command.add_option("--profile", options.profile,
+                     "Cost profile of --brick-accel auto (from `outcore calibrate`; default: "
+                     "$OUTCORE_COST_PROFILE, else $XDG_CONFIG_HOME/outcore/cost_profile.txt if it exists, else "
+                     "built-in)");
   command
       .add_option("--brick-bounds", options.brick_bounds,
                   "Bound tested before a brick beyond the upper hierarchy's box: aabb (none), sphere or obb "

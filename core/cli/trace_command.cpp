@@ -183,7 +183,7 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--accel-opt", args->engine.accel_options, "Brick structure option key=value (repeatable)");
   cmd->add_option(
       "--triangle-test", args->engine.triangle_test,
-      "Triangle test of --brick-accel bvh, kdtree, bsp, grid, hgrid, octree or quadtree: mt, watertight (default) or double");
+      "Triangle test of --brick-accel bvh, kdtree, bsp, grid, hgrid, octree, quadtree or auto: mt, watertight (default) or double");
   cmd->add_flag("--reference", args->engine.reference,
                 "Ground truth: float64 brute force per brick (watertight, slow) on the same store");
   cmd->add_flag("--no-reorder", args->no_reorder, "Trace rays one by one in input order (for comparison)");

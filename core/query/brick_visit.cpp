@@ -2,9 +2,9 @@
 
 namespace outcore {
 
-Status acquire_brick(BrickCache& cache, uint32_t brick, PinnedBrick& pin, BatchTally& tally) {
+Status acquire_brick(BrickCache& cache, uint32_t brick, uint64_t rays, PinnedBrick& pin, BatchTally& tally) {
   const auto t0 = Clock::now();
-  auto acquired = cache.acquire(brick);
+  auto acquired = cache.acquire(brick, rays);
   tally.stats.seconds_build += seconds_since(t0);
   if (!acquired.ok()) return acquired.status();
   pin = std::move(acquired).value();
@@ -12,9 +12,9 @@ Status acquire_brick(BrickCache& cache, uint32_t brick, PinnedBrick& pin, BatchT
   return Status::Ok();
 }
 
-std::optional<PinnedBrick> pin_for(BrickCache& cache, uint32_t brick, PinningTask& task) {
+std::optional<PinnedBrick> pin_for(BrickCache& cache, uint32_t brick, uint64_t rays, PinningTask& task) {
   const auto t0 = Clock::now();
-  auto acquired = cache.acquire(brick);
+  auto acquired = cache.acquire(brick, rays);
   task.build_seconds = seconds_since(t0);
   if (!acquired.ok()) {
     task.status = acquired.status();

@@ -28,9 +28,9 @@ constexpr std::size_t kAdvancePrefetch = 8;
 // (next brick, ray) pairs a task hands to the scheduler.
 using MovedRays = std::vector<std::pair<uint32_t, uint32_t>>;
 
-// Takes `brick` from the cache into `pin`, counting the acquisition and the
-// wait in `tally`.
-Status acquire_brick(BrickCache& cache, uint32_t brick, PinnedBrick& pin, BatchTally& tally);
+// Takes `brick` from the cache into `pin` for `rays` rays (0: not known;
+// BrickCache::acquire), counting the acquisition and the wait in `tally`.
+Status acquire_brick(BrickCache& cache, uint32_t brick, uint64_t rays, PinnedBrick& pin, BatchTally& tally);
 
 // What a parallel task that takes a brick from the cache reports.
 struct PinningTask {
@@ -40,9 +40,9 @@ struct PinningTask {
   Status status;
 };
 
-// Takes `brick` from the cache for `task`; nullopt (the error kept in the
-// task) when it cannot be had.
-std::optional<PinnedBrick> pin_for(BrickCache& cache, uint32_t brick, PinningTask& task);
+// Takes `brick` from the cache for `task` to trace `rays` rays; nullopt
+// (the error kept in the task) when it cannot be had.
+std::optional<PinnedBrick> pin_for(BrickCache& cache, uint32_t brick, uint64_t rays, PinningTask& task);
 
 // Adds a finished task's figures to the batch's (in task order).
 inline void merge_task(const PinningTask& task, BatchTally& tally) {

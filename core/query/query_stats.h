@@ -43,6 +43,18 @@ enum class StatsServer { kNo, kYes };
 // builds included); seconds_total is ServerStats.seconds_tracing (summed by
 // the server under that name).
 // clang-format off
+// builds_<structure> for each brick structure the factory names (auto is not
+// one: its builds are counted as the structure it chose).
+#define OUTCORE_STRUCTURE_BUILDS(X)                                                                 \
+  X(uint64_t, builds_embree,    "brick_builds_by_structure", "embree",    kSum, kNo, kNo)            \
+  X(uint64_t, builds_bvh,       "brick_builds_by_structure", "bvh",       kSum, kNo, kNo)            \
+  X(uint64_t, builds_kdtree,    "brick_builds_by_structure", "kdtree",    kSum, kNo, kNo)            \
+  X(uint64_t, builds_bsp,       "brick_builds_by_structure", "bsp",       kSum, kNo, kNo)            \
+  X(uint64_t, builds_grid,      "brick_builds_by_structure", "grid",      kSum, kNo, kNo)            \
+  X(uint64_t, builds_hgrid,     "brick_builds_by_structure", "hgrid",     kSum, kNo, kNo)            \
+  X(uint64_t, builds_octree,    "brick_builds_by_structure", "octree",    kSum, kNo, kNo)            \
+  X(uint64_t, builds_quadtree,  "brick_builds_by_structure", "quadtree",  kSum, kNo, kNo)            \
+  X(uint64_t, builds_reference, "brick_builds_by_structure", "reference", kSum, kNo, kNo)
 #define OUTCORE_QUERY_STATS(X)                                                                      \
   X(uint64_t, rays,                    "",        "rays",                    kSum, kYes, kYes)      \
   X(uint64_t, invalid_rays,            "",        "invalid_rays",            kSum, kYes, kYes)      \
@@ -75,6 +87,10 @@ enum class StatsServer { kNo, kYes };
   X(uint64_t, cache_hits,              "",        "cache_hits",              kSum, kYes, kNo)       \
   X(uint64_t, cache_misses,            "",        "cache_misses",            kSum, kYes, kNo)       \
   X(uint64_t, brick_builds,            "",        "brick_builds",            kSum, kYes, kNo)       \
+  /* of those, bricks built again as another structure (auto's refinement) */                       \
+  X(uint64_t, brick_rebuilds,          "",        "brick_rebuilds",          kSum, kNo,  kNo)       \
+  /* builds by the structure built (with auto: the one chosen) */                                   \
+  OUTCORE_STRUCTURE_BUILDS(X)                                                                       \
   X(uint64_t, evictions,               "",        "evictions",               kSum, kYes, kNo)       \
   /* subtree tier (0 without one): misses served by loading a file; of them */                      \
   /* those checked in full (first loads) and those on a kept mapping; files */                      \

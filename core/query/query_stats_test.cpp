@@ -44,13 +44,16 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
   stats.seconds_subtree_loads = 3.25;
   stats.rays_entering_no_brick = 99;  // added after the list was made: its number is apart
   stats.brick_visits_without_hit = 98, stats.bricks_skipped_by_bound = 97;  // so were these
+  stats.brick_rebuilds = 96, stats.builds_bvh = 95, stats.builds_grid = 94;
   EXPECT_EQ(stats.to_json(),
             R"({"rays":1,"invalid_rays":2,"rays_hit":3,"upper_nodes_visited":4,"rays_entering_no_brick":99,)"
             R"("brick_visits":5,"brick_visits_without_hit":98,)"
             R"("rays_in_brick_set":6,"proxy_tests":8,"bricks_skipped_by_proxy":9,)"
             R"("bricks_skipped_by_bound":97,"proxy_bytes":10,)"
             R"("rays_traced_ahead":7,"brick_acquisitions":11,"cache_hits":12,"cache_misses":13,)"
-            R"("brick_builds":14,"evictions":15,"subtree_loads":16,"subtree_loads_checked":17,)"
+            R"("brick_builds":14,"brick_rebuilds":96,"brick_builds_by_structure":{"embree":0,"bvh":95,)"
+            R"("kdtree":0,"bsp":0,"grid":94,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"
+            R"("evictions":15,"subtree_loads":16,"subtree_loads_checked":17,)"
             R"("subtree_loads_kept":18,"subtree_writes":19,"subtree_rejects":20,"subtree_bytes_read":21,)"
             R"("subtree_bytes_written":22,"peak_bytes_resident":23,"cache_budget_bytes":24,)"
             R"("seconds":{"total":0.25,"upper":0.75,"build":1.25,"brick":1.75,"proxy":2.25,)"
@@ -61,7 +64,9 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
             R"("rays_in_brick_set":0,"proxy_tests":0,"bricks_skipped_by_proxy":0,)"
             R"("bricks_skipped_by_bound":0,"proxy_bytes":0,)"
             R"("rays_traced_ahead":0,"brick_acquisitions":0,"cache_hits":0,"cache_misses":0,)"
-            R"("brick_builds":0,"evictions":0,"subtree_loads":0,"subtree_loads_checked":0,)"
+            R"("brick_builds":0,"brick_rebuilds":0,"brick_builds_by_structure":{"embree":0,"bvh":0,)"
+            R"("kdtree":0,"bsp":0,"grid":0,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"
+            R"("evictions":0,"subtree_loads":0,"subtree_loads_checked":0,)"
             R"("subtree_loads_kept":0,"subtree_writes":0,"subtree_rejects":0,"subtree_bytes_read":0,)"
             R"("subtree_bytes_written":0,"peak_bytes_resident":0,"cache_budget_bytes":0,)"
             R"("seconds":{"total":0,"upper":0,"build":0,"brick":0,"proxy":0,)"

@@ -25,7 +25,16 @@ namespace {
 class SweepPins {
  public:
   SweepPins(BrickCache& cache, BatchTally& tally, uint32_t brick_count)
-      : cache_(cache), tally_(tally), pins_(brick_count), pinned_(brick_count) {}
+      : cache_(cache), tally_(tally), pins_(brick_count), pinned_(brick_count), rays_(brick_count) {}
+
+  // Rays traced in `brick` (one relaxed add per group of rays, not per ray),
+  // handed to the cache by report_rays() as the bricks' use.
+  void note_rays(uint32_t brick, std::size_t rays) { rays_[brick].fetch_add(rays, std::memory_order_relaxed); }
+  void report_rays() {
+    std::vector<uint64_t> rays(rays_.size());
+    for (std::size_t b = 0; b < rays.size(); ++b) rays[b] = rays_[b].load(std::memory_order_relaxed);
+    cache_.add_rays_served(rays);
+  }
 
   // The brick's accel, pinned on first need; nullptr when it cannot be had
   // (the error is kept for status()).
@@ -38,7 +47,7 @@ class SweepPins {
     // Isolated: should another batch have evicted the brick, its build must
     // not pick up one of this batch's tasks, which could wait on this lock.
     const Status status =
-        tbb::this_task_arena::isolate([&] { return acquire_brick(cache_, brick, pins_[brick], tally_); });
+        tbb::this_task_arena::isolate([&] { return acquire_brick(cache_, brick, 0, pins_[brick], tally_); });
     if (!status.ok()) {
       if (status_.ok()) status_ = status;
       failed_.store(true, std::memory_order_relaxed);
@@ -56,6 +65,7 @@ class SweepPins {
   BatchTally& tally_;
   std::vector<PinnedBrick> pins_;
   std::vector<std::atomic<const BrickAccel*>> pinned_;
+  std::vector<std::atomic<uint64_t>> rays_;
   std::mutex mutex_;
   Status status_;
   std::atomic<bool> failed_{false};
@@ -109,6 +119,7 @@ std::size_t sweep_round(const RayWalk<kKind>& walk, SweepPins& pins, SweepScratc
     task.counters.visits_without_hit += walk.batch.trace(*accel, ids);
     task.trace_ticks += ticks() - trace_start;
     task.visits += ids.size();
+    pins.note_rays(brick, ids.size());
     for (const uint32_t ray : ids) {
       const uint32_t k = ray - static_cast<uint32_t>(base);
       const uint32_t next = walk.advance(local.progress[k], ray, task.counters);
@@ -159,6 +170,7 @@ Status run_in_cache_sweep(StrategyContext<kKind>& ctx) {
     sweep_chunk(ctx.walk, pins, ctx.scratch.sweep.local(), brick_count, c, tasks[c]);
   });
   OUTCORE_RETURN_IF_ERROR(pins.status());
+  pins.report_rays();
   uint64_t task_ticks = 0, trace_ticks = 0;
   for (const SweepTask& task : tasks) {
     ctx.tally.add(task.counters);

@@ -158,7 +158,7 @@ Status QueuedRun<kKind>::trace_resident_wave() {
   tbb::parallel_for(std::size_t{0}, tasks_.size(), [&](std::size_t t) {
     WaveTask& task = tasks_[t];
     moved_[t].clear();
-    const std::optional<PinnedBrick> pin = pin_for(ctx_.cache, task.brick, task);
+    const std::optional<PinnedBrick> pin = pin_for(ctx_.cache, task.brick, task.end - task.begin, task);
     if (!pin) return;
     const std::vector<uint32_t>& batch = wave_batches_[task.queue];
     const std::span<const uint32_t> ids(batch.data() + task.begin, task.end - task.begin);
@@ -187,7 +187,7 @@ Status QueuedRun<kKind>::trace_ahead_at_resident() {
     // listed rays stay listed for when it is built again.
     if (queues_.upcoming(b).empty() || !ctx_.cache.is_resident(b)) continue;
     PinnedBrick pin;
-    OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx_.cache, b, pin, ctx_.tally));
+    OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx_.cache, b, queues_.upcoming(b).size(), pin, ctx_.tally));
     ahead_.trace_at(b, pin.accel(), ctx_.tally);
   }
   return Status::Ok();
@@ -257,7 +257,8 @@ Status QueuedRun<kKind>::build_one(bool ahead_now) {
   const uint32_t brick = building_[0];
   const std::vector<uint32_t>& batch = wave_batches_[0];
   PinnedBrick pin;
-  OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx_.cache, brick, pin, ctx_.tally));
+  const uint64_t ahead_rays = ahead_now ? queues_.upcoming(brick).size() : 0;
+  OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx_.cache, brick, batch.size() + ahead_rays, pin, ctx_.tally));
   ctx_.gate.set_known_resident(brick);
   const BrickAccel& accel = pin.accel();
   const std::size_t chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
@@ -310,7 +311,8 @@ Status QueuedRun<kKind>::build_several(bool ahead_now) {
     moved_[q].clear();
     const uint32_t brick = building_[q];
     const auto t0 = Clock::now();
-    const std::optional<PinnedBrick> pin = pin_for(ctx_.cache, brick, task);
+    const std::size_t rays = wave_batches_[q].size() + (ahead_begin_[q + 1] - ahead_begin_[q]);
+    const std::optional<PinnedBrick> pin = pin_for(ctx_.cache, brick, rays, task);
     if (!pin) return;
     trace_and_advance(ctx_.walk, progress(), brick, pin->accel(), wave_batches_[q], task.counters, moved_[q]);
     ahead_.trace_range(brick, pin->accel(), ahead_begin_[q], ahead_begin_[q + 1], ahead_.task_counters()[q]);

@@ -54,7 +54,7 @@ Status run_resident_set(StrategyContext<kKind>& ctx) {
   std::vector<PinnedBrick> pins(brick_count);
   std::vector<const BrickAccel*> accels(brick_count);
   for (uint32_t b = 0; b < brick_count; ++b) {
-    OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx.cache, b, pins[b], ctx.tally));
+    OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx.cache, b, 0, pins[b], ctx.tally));
     accels[b] = &pins[b].accel();
   }
   const auto t_set = Clock::now();

@@ -26,7 +26,7 @@ Status run_sequential(StrategyContext<kKind>& ctx) {
     for (uint32_t brick = ctx.walk.start(progress[i], i, counters); brick != kInvalidId;
          brick = ctx.walk.advance(progress[i], i, counters)) {
       PinnedBrick pin;
-      OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx.cache, brick, pin, ctx.tally));
+      OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx.cache, brick, 1, pin, ctx.tally));
       counters.visits_without_hit += batch.trace(pin.accel(), std::span<const uint32_t>(&id, 1));
       ++stats.brick_visits;
     }

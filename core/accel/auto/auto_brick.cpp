@@ -1,0 +1,129 @@
+#include "core/accel/auto/auto_brick.h"
+
+#include <algorithm>
+#include <sstream>
+
+#include "core/accel/auto/auto_brick_serializer.h"
+
+namespace outcore {
+namespace {
+
+bool allowed_candidate(const std::string& name) {
+  return std::find(std::begin(kDefaultAutoCandidates), std::end(kDefaultAutoCandidates), name) !=
+         std::end(kDefaultAutoCandidates);
+}
+
+std::string allowed_list() {
+  std::string out;
+  for (const char* name : kDefaultAutoCandidates) out += (out.empty() ? "" : ", ") + std::string(name);
+  return out;
+}
+
+Expected<std::vector<std::string>> parse_candidates(const std::string& value) {
+  std::vector<std::string> names;
+  std::istringstream in(value);
+  for (std::string name; std::getline(in, name, ',');) {
+    if (!allowed_candidate(name)) {
+      return invalid_argument("brick accel auto: candidate '" + name + "' is not one of " + allowed_list() +
+                              " (embree and reference use another triangle test)");
+    }
+    if (std::find(names.begin(), names.end(), name) != names.end())
+      return invalid_argument("brick accel auto: candidate '" + name + "' listed twice");
+    names.push_back(name);
+  }
+  if (names.empty()) return invalid_argument("brick accel auto: option candidates names no structure");
+  return names;
+}
+
+}  // namespace
+
+Expected<std::unique_ptr<AutoBrickBuilder>> AutoBrickBuilder::create(const Config& config) {
+  std::unique_ptr<AutoBrickBuilder> builder(new AutoBrickBuilder());
+  if (config.candidates.empty()) {
+    builder->candidate_names_.assign(std::begin(kDefaultAutoCandidates), std::end(kDefaultAutoCandidates));
+  } else {
+    builder->candidate_names_ = config.candidates;
+  }
+  OUTCORE_ASSIGN_OR_RETURN(builder->profile_, resolve_cost_profile(config.profile_path));
+  for (const std::string& name : builder->candidate_names_) {
+    OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<BrickBuilder> made,
+                             make_brick_builder(name, config.candidate_options));
+    const StructureCost* cost = builder->profile_.find(name);
+    if (cost == nullptr) {
+      return invalid_argument("brick accel auto: cost profile " + builder->profile_.origin +
+                              " has no costs for candidate '" + name +
+                              "' (run `outcore calibrate` or drop it from candidates)");
+    }
+    builder->hit_rounding_scale_ = std::max(builder->hit_rounding_scale_, made->hit_rounding_scale());
+    builder->costs_.push_back(*cost);
+    builder->builders_.push_back(std::move(made));
+  }
+  builder->serializer_ = make_auto_brick_serializer(*builder);
+  return builder;
+}
+
+StructureChoice AutoBrickBuilder::choose(const BrickFeatures& features, uint64_t rays) const {
+  StructureChoice choice;
+  choice.predicted_seconds.resize(costs_.size());
+  for (std::size_t c = 0; c < costs_.size(); ++c) {
+    choice.predicted_seconds[c] = costs_[c].build_seconds(features) +
+                                  static_cast<double>(rays) * costs_[c].trace_seconds_per_ray(features);
+    if (choice.predicted_seconds[c] < choice.predicted_seconds[choice.candidate])
+      choice.candidate = static_cast<uint32_t>(c);
+  }
+  return choice;
+}
+
+Expected<std::unique_ptr<BrickAccel>> AutoBrickBuilder::build(BrickData&& brick) const {
+  return build_for(std::move(brick), BuildDemand{});
+}
+
+Expected<std::unique_ptr<BrickAccel>> AutoBrickBuilder::build_for(BrickData&& brick,
+                                                                  const BuildDemand& demand) const {
+  const BrickFeatures features = measure_brick_features(brick.triangles);
+  const uint32_t candidate = choose(features, demand.rays_expected).candidate;
+  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<BrickAccel> inner, builders_[candidate]->build(std::move(brick)));
+  return std::unique_ptr<BrickAccel>(new AutoBrickAccel(std::move(inner), candidate, features));
+}
+
+bool AutoBrickBuilder::worth_rebuilding(const BrickAccel& accel, const BuildDemand& demand) const {
+  const auto* built = dynamic_cast<const AutoBrickAccel*>(&accel);
+  if (built == nullptr || demand.rays_expected == 0) return false;
+  const StructureChoice best = choose(built->features(), demand.rays_expected);
+  if (best.candidate == built->candidate()) return false;
+  const double keep = static_cast<double>(demand.rays_expected) *
+                      costs_[built->candidate()].trace_seconds_per_ray(built->features());
+  return best.predicted_seconds[best.candidate] * kRebuildMargin < keep;
+}
+
+std::string_view AutoBrickBuilder::structure_of(const BrickAccel& accel) const {
+  const auto* built = dynamic_cast<const AutoBrickAccel*>(&accel);
+  return built != nullptr ? std::string_view(candidate_names_[built->candidate()]) : std::string_view(name_);
+}
+
+uint64_t AutoBrickBuilder::reserve_bytes(uint32_t triangle_count) const {
+  uint64_t most = 0;
+  for (const auto& builder : builders_) most = std::max(most, builder->reserve_bytes(triangle_count));
+  return most + sizeof(AutoBrickAccel);
+}
+
+Expected<std::unique_ptr<BrickBuilder>> make_auto_builder(const BrickAccelOptions& options) {
+  AutoBrickBuilder::Config config;
+  for (const auto& [key, value] : options) {
+    if (key == "candidates") {
+      OUTCORE_ASSIGN_OR_RETURN(config.candidates, parse_candidates(value));
+    } else if (key == "triangle_test") {
+      config.candidate_options[key] = value;
+    } else if (key == "profile") {
+      if (value.empty()) return invalid_argument("brick accel auto: option profile needs a file name");
+      config.profile_path = value;
+    } else {
+      return invalid_argument("brick accel auto: unknown option '" + key +
+                              "' (known: candidates, triangle_test, profile)");
+    }
+  }
+  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<AutoBrickBuilder> builder, AutoBrickBuilder::create(config));
+  return std::unique_ptr<BrickBuilder>(std::move(builder));
+}
+
+}  // namespace outcore

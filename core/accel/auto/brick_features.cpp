@@ -1,0 +1,57 @@
+#include "core/accel/auto/brick_features.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace outcore {
+namespace {
+
+constexpr int kCellsPerAxis = 4;
+constexpr int kCells = kCellsPerAxis * kCellsPerAxis * kCellsPerAxis;
+
+int cell_along(float value, float lo, float extent) {
+  if (!(extent > 0)) return 0;
+  const int cell = static_cast<int>((value - lo) / extent * kCellsPerAxis);
+  return std::clamp(cell, 0, kCellsPerAxis - 1);
+}
+
+}  // namespace
+
+std::array<double, kFeatureCount> BrickFeatures::regressors() const {
+  return {1.0, std::log2(static_cast<double>(triangles) + 1.0), density_spread, flatness,
+          std::log2(1.0 + area_ratio)};
+}
+
+BrickFeatures measure_brick_features(std::span<const Triangle> triangles) {
+  BrickFeatures features;
+  features.triangles = static_cast<uint32_t>(triangles.size());
+  if (triangles.empty()) return features;
+  Aabb bounds;
+  for (const Triangle& t : triangles) bounds.extend(t.bounds());
+  const Vec3f extent = bounds.extent();
+  const float widest = std::max({extent.x, extent.y, extent.z});
+  const float thinnest = std::min({extent.x, extent.y, extent.z});
+  features.flatness = widest > 0 ? static_cast<double>(thinnest) / widest : 1.0;
+
+  std::array<uint32_t, kCells> counts{};
+  double area = 0;
+  for (const Triangle& t : triangles) {
+    const Vec3f c = t.centroid();
+    const int x = cell_along(c.x, bounds.lo.x, extent.x);
+    const int y = cell_along(c.y, bounds.lo.y, extent.y);
+    const int z = cell_along(c.z, bounds.lo.z, extent.z);
+    ++counts[static_cast<std::size_t>((z * kCellsPerAxis + y) * kCellsPerAxis + x)];
+    const Vec3d a(t.v0), b(t.v1), d(t.v2);
+    const Vec3d n = cross(b - a, d - a);
+    const double twice = std::sqrt(n.x * n.x + n.y * n.y + n.z * n.z);
+    if (std::isfinite(twice)) area += 0.5 * twice;
+  }
+  const uint32_t fullest = *std::max_element(counts.begin(), counts.end());
+  features.density_spread =
+      std::log2(static_cast<double>(fullest) * kCells / static_cast<double>(triangles.size()));
+  const double surface = 2.0 * bounds.half_area();
+  features.area_ratio = surface > 0 && std::isfinite(surface) ? area / surface : 0.0;
+  return features;
+}
+
+}  // namespace outcore
