@@ -24,7 +24,7 @@ const EmbreeBrickConfig& embree_config(const BrickBuilder& builder) {
 
 TEST(BrickAccelFactory, NamesAndDefaults) {
   EXPECT_EQ(brick_accel_names(), (std::vector<std::string>{"embree", "bvh", "kdtree", "bsp", "grid", "hgrid",
-                                                           "octree", "quadtree", "reference"}));
+                                                           "octree", "quadtree", "reference", "auto"}));
   auto builder = make_brick_builder("embree", {});
   ASSERT_TRUE(builder.ok()) << builder.status().to_string();
   EXPECT_EQ((*builder)->name(), "embree");

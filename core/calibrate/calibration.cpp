@@ -49,8 +49,8 @@ std::vector<Ray> rays_through(const std::vector<Triangle>& triangles, uint32_t c
   return rays;
 }
 
-Expected<StructureMeasure> measure(const BrickBuilder& builder, const BrickData& data, const std::vector<Ray>& rays,
-                                   double min_seconds) {
+Expected<StructureMeasure> measure(const BrickBuilder& builder, const BrickData& data,
+                                   const std::vector<Ray>& rays, double min_seconds) {
   StructureMeasure result;
   result.build_seconds = std::numeric_limits<double>::infinity();
   std::unique_ptr<BrickAccel> accel;
@@ -174,8 +174,9 @@ Expected<std::vector<SampleBrick>> sample_store_bricks(const SceneStore& store, 
   std::vector<uint32_t> order(store.brick_count());
   std::iota(order.begin(), order.end(), 0u);
   const auto& bricks = store.manifest().bricks;
-  std::stable_sort(order.begin(), order.end(),
-                   [&](uint32_t a, uint32_t b) { return bricks[a].triangle_count < bricks[b].triangle_count; });
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) {
+    return bricks[a].triangle_count < bricks[b].triangle_count;
+  });
   std::vector<uint32_t> chosen;
   const std::size_t want = std::min<std::size_t>(max_bricks, order.size());
   for (std::size_t k = 0; k < want; ++k) {
@@ -233,9 +234,11 @@ Expected<Calibration> calibrate(std::vector<SampleBrick> samples, const Calibrat
     CalibrationSample measured;
     measured.label = sample.label;
     measured.features = measure_brick_features(sample.data.triangles);
-    const std::vector<Ray> rays = rays_through(sample.data.triangles, options.rays_per_brick, options.seed + k);
+    const std::vector<Ray> rays =
+        rays_through(sample.data.triangles, options.rays_per_brick, options.seed + k);
     for (std::size_t s = 0; s < builders.size(); ++s) {
-      Expected<StructureMeasure> m = measure(*builders[s], sample.data, rays, options.min_seconds_per_measure);
+      Expected<StructureMeasure> m =
+          measure(*builders[s], sample.data, rays, options.min_seconds_per_measure);
       if (!m.ok()) {
         return m.status().with_context("calibrating '" + calibration.structures[s] + "' on " + sample.label);
       }

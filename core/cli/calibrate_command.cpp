@@ -6,13 +6,13 @@
 
 #include <chrono>
 #include <cmath>
-#include <cstring>
-#include <thread>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/accel/auto/auto_brick.h"
@@ -62,7 +62,8 @@ void print_report(const Calibration& c) {
       for (std::size_t s = 0; s < c.structures.size(); ++s) {
         const double m = sample.measures[s].build_seconds + rays * sample.measures[s].trace_seconds_per_ray;
         const StructureCost& cost = c.profile.structures[s];
-        const double p = cost.build_seconds(sample.features) + rays * cost.trace_seconds_per_ray(sample.features);
+        const double p =
+            cost.build_seconds(sample.features) + rays * cost.trace_seconds_per_ray(sample.features);
         if (m < measured_min) measured_min = m, measured_best = s;
         if (p < predicted_min) predicted_min = p, predicted_best = s;
       }
@@ -73,8 +74,9 @@ void print_report(const Calibration& c) {
       (void)measured_best;
     }
   }
-  std::printf("fit: the predicted choice is within 10%% of the measured best in %d of %d (sample, rays) cases\n",
-              agree, total);
+  std::printf(
+      "fit: the predicted choice is within 10%% of the measured best in %d of %d (sample, rays) cases\n",
+      agree, total);
 }
 
 int run_calibrate(const CalibrateArgs& args) {
@@ -108,7 +110,8 @@ int run_calibrate(const CalibrateArgs& args) {
                     (args.store.empty() ? std::string("built-in scenes") : args.store) + ", " +
                     std::to_string(std::thread::hardware_concurrency()) + " threads";
   const std::string path = args.profile.empty() ? default_cost_profile_path() : args.profile;
-  if (path.empty()) return report_command_error("calibrate", "no --profile given and no HOME to write one in");
+  if (path.empty())
+    return report_command_error("calibrate", "no --profile given and no HOME to write one in");
   std::error_code ec;
   const std::filesystem::path parent = std::filesystem::path(path).parent_path();
   if (!parent.empty()) std::filesystem::create_directories(parent, ec);
@@ -125,8 +128,9 @@ int run_calibrate(const CalibrateArgs& args) {
 void add_calibrate_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<CalibrateArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "calibrate", "Measure each brick structure's build and trace cost here and write the cost profile of "
-                   "--brick-accel auto");
+      "calibrate",
+      "Measure each brick structure's build and trace cost here and write the cost profile of "
+      "--brick-accel auto");
   cmd->add_option("store", args->store,
                   "Scene store whose bricks to sample (default: built-in procedural scenes)");
   cmd->add_option("--profile", args->profile,
@@ -134,7 +138,8 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
                   "$XDG_CONFIG_HOME/outcore/cost_profile.txt, XDG_CONFIG_HOME defaulting to ~/.config)");
   cmd->add_option("--structures", args->structures,
                   "Structures to measure, comma-separated (default: auto's candidates)");
-  cmd->add_option("--triangle-test", args->triangle_test, "Triangle test of every structure (default watertight)");
+  cmd->add_option("--triangle-test", args->triangle_test,
+                  "Triangle test of every structure (default watertight)");
   cmd->add_option("--bricks", args->bricks, "Sample bricks of STORE, spread over its brick sizes")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));

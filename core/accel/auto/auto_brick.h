@@ -69,7 +69,8 @@ class AutoBrickBuilder final : public BrickBuilder {
   static Expected<std::unique_ptr<AutoBrickBuilder>> create(const Config& config);
 
   Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override;
-  Expected<std::unique_ptr<BrickAccel>> build_for(BrickData&& brick, const BuildDemand& demand) const override;
+  Expected<std::unique_ptr<BrickAccel>> build_for(BrickData&& brick,
+                                                  const BuildDemand& demand) const override;
   bool worth_rebuilding(const BrickAccel& accel, const BuildDemand& demand) const override;
   std::string_view structure_of(const BrickAccel& accel) const override;
   uint64_t reserve_bytes(uint32_t triangle_count) const override;
@@ -99,7 +100,7 @@ class AutoBrickBuilder final : public BrickBuilder {
   std::unique_ptr<BrickSerializer> serializer_;  // null when a candidate has none
 };
 
-inline constexpr const char* kDefaultAutoCandidates[] = {"bvh",  "kdtree", "bsp",     "grid",
+inline constexpr const char* kDefaultAutoCandidates[] = {"bvh",   "kdtree", "bsp",     "grid",
                                                          "hgrid", "octree", "quadtree"};
 
 // The factory's maker: options candidates=a,b,..., triangle_test, profile.

@@ -36,8 +36,8 @@ Status parse_coefficients(const std::vector<std::string>& words, const std::stri
                           std::array<double, kFeatureCount>& out) {
   if (words.size() != 2 + kFeatureCount) {
     return invalid_argument(where + ": '" + words[0] + "' needs a structure and " +
-                            std::to_string(kFeatureCount) + " numbers, got " + std::to_string(words.size() - 1) +
-                            " items");
+                            std::to_string(kFeatureCount) + " numbers, got " +
+                            std::to_string(words.size() - 1) + " items");
   }
   for (std::size_t i = 0; i < kFeatureCount; ++i) {
     const std::string& text = words[2 + i];
