@@ -199,7 +199,10 @@ CostProfile fit_cost_profile(const std::vector<std::string>& structures,
   CostProfile profile;
   profile.origin = "calibration";
   std::vector<std::array<double, kFeatureCount>> x;
-  for (const CalibrationSample& sample : samples) x.push_back(sample.features.regressors());
+  for (const CalibrationSample& sample : samples) {
+    x.push_back(sample.features.regressors());
+    profile.samples.push_back(sample.features);
+  }
   for (std::size_t s = 0; s < structures.size(); ++s) {
     std::vector<double> log_build, log_trace;
     for (const CalibrationSample& sample : samples) {

@@ -35,7 +35,52 @@ Expected<std::vector<std::string>> parse_candidates(const std::string& value) {
   return names;
 }
 
+// The probe bricks of dominated_candidates().
+std::vector<BrickFeatures> probe_bricks() {
+  std::vector<BrickFeatures> probes;
+  for (uint32_t triangles = 256; triangles <= (uint32_t{1} << 18); triangles *= 4) {
+    for (const double spread : {0.0, 2.0, 4.0, 6.0}) {
+      for (const double flatness : {0.0, 0.5, 1.0}) {
+        for (const double area : {0.5, 1.0, 4.0}) {
+          BrickFeatures f;
+          f.triangles = triangles, f.density_spread = spread, f.flatness = flatness, f.area_ratio = area;
+          probes.push_back(f);
+        }
+      }
+    }
+  }
+  return probes;
+}
+
 }  // namespace
+
+std::vector<std::string> never_chosen_candidates(const std::vector<std::string>& names,
+                                                 const CostProfile& profile) {
+  std::vector<const StructureCost*> costs;
+  for (const std::string& name : names) costs.push_back(profile.find(name));
+  std::vector<bool> chosen(names.size(), false);
+  for (const BrickFeatures& f : profile.samples.empty() ? probe_bricks() : profile.samples) {
+    std::vector<double> build(names.size()), trace(names.size());
+    for (std::size_t c = 0; c < names.size(); ++c) {
+      if (costs[c] == nullptr) continue;
+      build[c] = costs[c]->build_seconds(f);
+      trace[c] = costs[c]->trace_seconds_per_ray(f);
+    }
+    for (double rays = 0; rays < 1e13; rays = rays == 0 ? 1 : rays * 2) {
+      std::size_t best = names.size();
+      for (std::size_t c = 0; c < names.size(); ++c) {
+        if (costs[c] == nullptr) continue;
+        if (best == names.size() || build[c] + rays * trace[c] < build[best] + rays * trace[best]) best = c;
+      }
+      if (best < names.size()) chosen[best] = true;
+    }
+  }
+  std::vector<std::string> never;
+  for (std::size_t c = 0; c < names.size(); ++c) {
+    if (!chosen[c]) never.push_back(names[c]);
+  }
+  return never;
+}
 
 Expected<std::unique_ptr<AutoBrickBuilder>> AutoBrickBuilder::create(const Config& config) {
   std::unique_ptr<AutoBrickBuilder> builder(new AutoBrickBuilder());
@@ -46,14 +91,21 @@ Expected<std::unique_ptr<AutoBrickBuilder>> AutoBrickBuilder::create(const Confi
   }
   OUTCORE_ASSIGN_OR_RETURN(builder->profile_, resolve_cost_profile(config.profile_path));
   for (const std::string& name : builder->candidate_names_) {
-    OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<BrickBuilder> made,
-                             make_brick_builder(name, config.candidate_options));
-    const StructureCost* cost = builder->profile_.find(name);
-    if (cost == nullptr) {
+    if (builder->profile_.find(name) == nullptr) {
       return invalid_argument("brick accel auto: cost profile " + builder->profile_.origin +
                               " has no costs for candidate '" + name +
                               "' (run `outcore calibrate` or drop it from candidates)");
     }
+  }
+  builder->dropped_names_ = never_chosen_candidates(builder->candidate_names_, builder->profile_);
+  std::erase_if(builder->candidate_names_, [&](const std::string& name) {
+    return std::find(builder->dropped_names_.begin(), builder->dropped_names_.end(), name) !=
+           builder->dropped_names_.end();
+  });
+  for (const std::string& name : builder->candidate_names_) {
+    OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<BrickBuilder> made,
+                             make_brick_builder(name, config.candidate_options));
+    const StructureCost* cost = builder->profile_.find(name);
     builder->hit_rounding_scale_ = std::max(builder->hit_rounding_scale_, made->hit_rounding_scale());
     builder->costs_.push_back(*cost);
     builder->builders_.push_back(std::move(made));

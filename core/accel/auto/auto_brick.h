@@ -82,6 +82,9 @@ class AutoBrickBuilder final : public BrickBuilder {
   // is to serve `rays` rays (ties: the earlier candidate).
   StructureChoice choose(const BrickFeatures& features, uint64_t rays) const;
   const std::vector<std::string>& candidates() const { return candidate_names_; }
+  // Candidates dropped because the profile never makes them the least cost
+  // (never_chosen_candidates()).
+  const std::vector<std::string>& dropped() const { return dropped_names_; }
   const CostProfile& profile() const { return profile_; }
   const BrickBuilder& candidate_builder(uint32_t candidate) const { return *builders_[candidate]; }
 
@@ -93,6 +96,7 @@ class AutoBrickBuilder final : public BrickBuilder {
   AutoBrickBuilder() = default;
   std::string name_ = "auto";
   std::vector<std::string> candidate_names_;
+  std::vector<std::string> dropped_names_;
   std::vector<std::unique_ptr<BrickBuilder>> builders_;
   std::vector<StructureCost> costs_;  // per candidate, from the profile
   CostProfile profile_;
@@ -102,6 +106,17 @@ class AutoBrickBuilder final : public BrickBuilder {
 
 inline constexpr const char* kDefaultAutoCandidates[] = {"bvh",   "kdtree", "bsp",     "grid",
                                                          "hgrid", "octree", "quadtree"};
+
+// The structures among `names` that `profile` says are never worth choosing:
+// on no brick the profile was measured on (its samples; without any, probe
+// bricks of 256 to 256 k triangles, flat to cubic, even to a teapot in a
+// stadium, sparse to dense surface) and for no ray count (0, 1, 2, 4, ...
+// 2^43) are they the least cost of `names`. The model is not trusted far
+// from what was measured. Dropping them keeps the
+// cache's reservation (the largest candidate's bound) from paying for
+// structures that would never be built.
+std::vector<std::string> never_chosen_candidates(const std::vector<std::string>& names,
+                                                 const CostProfile& profile);
 
 // The factory's maker: options candidates=a,b,..., triangle_test, profile.
 Expected<std::unique_ptr<BrickBuilder>> make_auto_builder(const BrickAccelOptions& options);

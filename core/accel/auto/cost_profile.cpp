@@ -67,6 +67,25 @@ Status check_first_line(std::string_view line, const std::string& origin) {
   return Status::Ok();
 }
 
+Expected<BrickFeatures> parse_sample(const std::vector<std::string>& words, const std::string& where) {
+  BrickFeatures f;
+  if (words.size() != 5) {
+    return invalid_argument(where +
+                            ": 'sample' needs triangles, density_spread, flatness and area_ratio, got " +
+                            std::to_string(words.size() - 1) + " items");
+  }
+  const bool ok = parse_number(words[1], f.triangles) && parse_number(words[2], f.density_spread) &&
+                  parse_number(words[3], f.flatness) && parse_number(words[4], f.area_ratio) &&
+                  std::isfinite(f.density_spread) && f.density_spread >= 0 && f.density_spread <= 6.5 &&
+                  f.flatness >= 0 && f.flatness <= 1 && std::isfinite(f.area_ratio) && f.area_ratio >= 0;
+  if (!ok) {
+    return invalid_argument(where +
+                            ": sample needs a triangle count, a density_spread in [0, 6.5], a flatness "
+                            "in [0, 1] and a finite area_ratio >= 0");
+  }
+  return f;
+}
+
 struct PendingCost {
   StructureCost cost;
   bool has_build = false, has_trace = false;
@@ -121,8 +140,14 @@ Expected<CostProfile> parse_cost_profile(std::string_view text, const std::strin
       has_features = true;
       continue;
     }
+    if (words[0] == "sample") {
+      OUTCORE_ASSIGN_OR_RETURN(BrickFeatures sample, parse_sample(words, where));
+      profile.samples.push_back(sample);
+      continue;
+    }
     if (words[0] != "build" && words[0] != "trace") {
-      return invalid_argument(where + ": unknown item '" + words[0] + "' (known: features, build, trace)");
+      return invalid_argument(where + ": unknown item '" + words[0] +
+                              "' (known: features, build, trace, sample)");
     }
     if (!has_features) return invalid_argument(where + ": the 'features' line must come first");
     const bool is_build = words[0] == "build";
@@ -177,6 +202,12 @@ std::string format_cost_profile(const CostProfile& profile) {
       for (const double c : is_build ? cost.build : cost.trace) out << " " << c;
       out << "\n";
     }
+  }
+  if (!profile.samples.empty())
+    out << "# the measured bricks: triangles density_spread flatness area_ratio\n";
+  for (const BrickFeatures& f : profile.samples) {
+    out << "sample " << f.triangles << " " << f.density_spread << " " << f.flatness << " " << f.area_ratio
+        << "\n";
   }
   return out.str();
 }

@@ -16,7 +16,11 @@
 //   features constant log2_triangles density_spread flatness log2_area_ratio
 //   build <structure> <5 numbers>
 //   trace <structure> <5 numbers>
-// Every structure named needs both lines. Errors name the file and line.
+//   sample <triangles> <density_spread> <flatness> <area_ratio>   (optional)
+// Every structure named needs both lines. sample lines are the features of
+// the bricks the profile was measured on (auto considers only structures
+// that are the least cost on one of them; without any, a built-in grid of
+// probe bricks). Errors name the file and line.
 // Default location: $OUTCORE_COST_PROFILE if set, else
 // $XDG_CONFIG_HOME/outcore/cost_profile.txt (XDG_CONFIG_HOME defaulting to
 // ~/.config); `--profile FILE` overrides it; when no such file exists the
@@ -50,6 +54,7 @@ struct CostProfile {
   std::string origin;   // "built-in" or the file it was read from
   std::string machine;  // the "# machine:" line, when there is one
   std::vector<StructureCost> structures;
+  std::vector<BrickFeatures> samples;
 
   const StructureCost* find(std::string_view structure) const;
 };
