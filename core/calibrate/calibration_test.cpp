@@ -39,7 +39,7 @@ TEST(Calibration, TheFitRecoversKnownCoefficients) {
   for (const CalibrationSample& s : samples) {
     EXPECT_NEAR(profile.structures[0].build_seconds(s.features) / s.measures[0].build_seconds, 1.0, 0.12);
     EXPECT_NEAR(profile.structures[0].trace_seconds_per_ray(s.features) / s.measures[0].trace_seconds_per_ray,
-                1.0, 0.05);
+                1.0, 0.12);
   }
 }
 
