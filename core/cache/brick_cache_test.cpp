@@ -577,3 +577,83 @@ TEST_F(BrickCacheTest, AReservationOverrunIsCountedNotFatal) {
 
 }  // namespace
 }  // namespace outcore
+
+namespace outcore {
+namespace {
+
+// A builder that records the demand of each build and wants a rebuild once a
+// brick's expected rays reach a threshold (a stand-in for auto's choice).
+class DemandBuilder final : public BrickBuilder {
+ public:
+  explicit DemandBuilder(uint64_t rebuild_at) : rebuild_at_(rebuild_at) {}
+  Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override {
+    return build_for(std::move(brick), BuildDemand{});
+  }
+  Expected<std::unique_ptr<BrickAccel>> build_for(BrickData&& brick, const BuildDemand& demand) const override {
+    demands_->push_back(demand);
+    const uint64_t bytes = brick.triangles.size() * (demand.rays_expected >= rebuild_at_ ? 60 : 40);
+    return std::unique_ptr<BrickAccel>(std::make_unique<CountingAccel>(std::move(brick), bytes));
+  }
+  bool worth_rebuilding(const BrickAccel& accel, const BuildDemand& demand) const override {
+    return demand.rays_expected >= rebuild_at_ && accel.memory_bytes() == accel.triangle_count() * 40u;
+  }
+  std::string_view structure_of(const BrickAccel& accel) const override {
+    return accel.memory_bytes() == accel.triangle_count() * 40u ? "grid" : "bvh";
+  }
+  uint64_t reserve_bytes(uint32_t triangle_count) const override { return triangle_count * 60; }
+  const std::string& name() const override {
+    static const std::string kName = "demand";
+    return kName;
+  }
+  std::shared_ptr<std::vector<BuildDemand>> demands() const { return demands_; }
+
+ private:
+  uint64_t rebuild_at_;
+  std::shared_ptr<std::vector<BuildDemand>> demands_ = std::make_shared<std::vector<BuildDemand>>();
+};
+
+TEST_F(BrickCacheTest, RaysAreSummedPerBrickAndABrickWorthRebuildingIsRebuiltUnlessPinned) {
+  auto builder = std::make_unique<DemandBuilder>(100);
+  const auto demands = builder->demands();
+  auto cache = make_cache(std::move(builder), kUnlimited);
+  {
+    auto pin = cache->acquire(3, 30);
+    ASSERT_TRUE(pin.ok());
+    ASSERT_EQ(demands->size(), 1u);
+    EXPECT_EQ(demands->back().rays_now, 30u);
+    EXPECT_EQ(demands->back().rays_expected, 30u);
+    // Pinned: 30 + 80 rays would pay for a rebuild, but the brick is in use.
+    auto again = cache->acquire(3, 80);
+    ASSERT_TRUE(again.ok());
+    EXPECT_TRUE(again->was_hit());
+    EXPECT_EQ(demands->size(), 1u);
+  }
+  const CacheCounters before = cache->counters();
+  EXPECT_EQ(before.rebuilds, 0u);
+  EXPECT_EQ(before.builds_by_structure[brick_structure_index("grid")], 1u);
+  // Unpinned now: the next acquisition rebuilds it for 30 + 80 + 5 rays.
+  auto pin = cache->acquire(3, 5);
+  ASSERT_TRUE(pin.ok());
+  EXPECT_FALSE(pin->was_hit());
+  ASSERT_EQ(demands->size(), 2u);
+  EXPECT_EQ(demands->back().rays_expected, 115u);
+  EXPECT_EQ(demands->back().rays_now, 5u);
+  const CacheCounters after = cache->counters();
+  EXPECT_EQ(after.rebuilds, 1u);
+  EXPECT_EQ(after.builds, 2u);
+  EXPECT_EQ(after.evictions, 0u);
+  EXPECT_EQ(after.builds_by_structure[brick_structure_index("bvh")], 1u);
+  EXPECT_EQ(after.resident_bricks, 1u);
+  EXPECT_EQ(after.resident_bytes, triangles(3) * 60u);  // the old brick's bytes released
+  pin->release();
+  // Rays reported after the fact (the in-cache sweep) count too, and survive eviction.
+  std::vector<uint64_t> rays(store().brick_count(), 0);
+  rays[4] = 7;
+  cache->add_rays_served(rays);
+  auto other = cache->acquire(4, 1);
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ(demands->back().rays_expected, 8u);
+}
+
+}  // namespace
+}  // namespace outcore
