@@ -284,6 +284,12 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
   response->set_cache_hits(cache.hits);
   response->set_cache_misses(cache.misses);
   response->set_brick_builds(cache.builds);
+  response->set_brick_rebuilds(cache.rebuilds);
+  const std::vector<std::string> structures = brick_accel_names();
+  for (std::size_t s = 0; s < structures.size() && s < kMaxBrickStructures; ++s) {
+    if (cache.builds_by_structure[s] > 0)
+      (*response->mutable_brick_builds_by_structure())[structures[s]] = cache.builds_by_structure[s];
+  }
   response->set_evictions(cache.evictions);
   response->set_bytes_built(cache.bytes_built);
   response->set_build_seconds(cache.build_seconds);

@@ -589,7 +589,8 @@ class DemandBuilder final : public BrickBuilder {
   Expected<std::unique_ptr<BrickAccel>> build(BrickData&& brick) const override {
     return build_for(std::move(brick), BuildDemand{});
   }
-  Expected<std::unique_ptr<BrickAccel>> build_for(BrickData&& brick, const BuildDemand& demand) const override {
+  Expected<std::unique_ptr<BrickAccel>> build_for(BrickData&& brick,
+                                                  const BuildDemand& demand) const override {
     demands_->push_back(demand);
     const uint64_t bytes = brick.triangles.size() * (demand.rays_expected >= rebuild_at_ ? 60 : 40);
     return std::unique_ptr<BrickAccel>(std::make_unique<CountingAccel>(std::move(brick), bytes));

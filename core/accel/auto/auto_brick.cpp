@@ -84,12 +84,20 @@ std::vector<std::string> never_chosen_candidates(const std::vector<std::string>&
 
 Expected<std::unique_ptr<AutoBrickBuilder>> AutoBrickBuilder::create(const Config& config) {
   std::unique_ptr<AutoBrickBuilder> builder(new AutoBrickBuilder());
+  OUTCORE_ASSIGN_OR_RETURN(builder->profile_, resolve_cost_profile(config.profile_path));
   if (config.candidates.empty()) {
-    builder->candidate_names_.assign(std::begin(kDefaultAutoCandidates), std::end(kDefaultAutoCandidates));
+    // The defaults the profile measured (calibrate --structures may have
+    // measured fewer); named candidates must all be in it.
+    for (const char* name : kDefaultAutoCandidates) {
+      if (builder->profile_.find(name) != nullptr) builder->candidate_names_.emplace_back(name);
+    }
+    if (builder->candidate_names_.empty()) {
+      return invalid_argument("brick accel auto: cost profile " + builder->profile_.origin +
+                              " has costs for none of " + allowed_list());
+    }
   } else {
     builder->candidate_names_ = config.candidates;
   }
-  OUTCORE_ASSIGN_OR_RETURN(builder->profile_, resolve_cost_profile(config.profile_path));
   for (const std::string& name : builder->candidate_names_) {
     if (builder->profile_.find(name) == nullptr) {
       return invalid_argument("brick accel auto: cost profile " + builder->profile_.origin +

@@ -62,7 +62,7 @@ struct StructureChoice {
 class AutoBrickBuilder final : public BrickBuilder {
  public:
   struct Config {
-    std::vector<std::string> candidates;  // empty: kDefaultAutoCandidates
+    std::vector<std::string> candidates;  // empty: those of kDefaultAutoCandidates the profile has
     BrickAccelOptions candidate_options;  // given to each (triangle_test)
     std::string profile_path;             // empty: resolve_cost_profile("")
   };

@@ -55,7 +55,7 @@ TEST(AutoBrick, FactoryRejectsBadOptionsNamingThem) {
   }
 }
 
-TEST(AutoBrick, AProfileWithoutACandidateIsAnErrorNamingBoth) {
+TEST(AutoBrick, NamedCandidatesMustBeInTheProfileDefaultOnesAreThoseItHas) {
   testing::TempDir dir;
   const std::string path = dir.path() + "/p.txt";
   std::ofstream(path) << "# outcore cost profile, version 1\n"
@@ -67,6 +67,16 @@ TEST(AutoBrick, AProfileWithoutACandidateIsAnErrorNamingBoth) {
             std::string::npos)
       << made.status().to_string();
   EXPECT_TRUE(make_brick_builder("auto", {{"profile", path}, {"candidates", "bvh"}}).ok());
+  const auto defaults = make_auto({{"profile", path}});
+  ASSERT_NE(defaults, nullptr);
+  EXPECT_EQ(defaults->candidates(), std::vector<std::string>{"bvh"});
+  std::ofstream(path) << "# outcore cost profile, version 1\n"
+                         "features constant log2_triangles density_spread flatness log2_area_ratio\n"
+                         "build foo -16 0 0 0 0\ntrace foo -16 0 0 0 0\n";
+  auto none = make_brick_builder("auto", {{"profile", path}});
+  ASSERT_FALSE(none.ok());
+  EXPECT_NE(none.status().message().find("has costs for none of bvh, kdtree"), std::string::npos)
+      << none.status().to_string();
 }
 
 TEST(AutoBrick, FewRaysGetTheCheapestBuildManyTheCheapestTraceAndTheChoiceIsMonotone) {

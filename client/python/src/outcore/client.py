@@ -94,7 +94,9 @@ def _message_to_dict(message) -> dict:
     out = {}
     for field in message.DESCRIPTOR.fields:
         value = getattr(message, field.name)
-        if field.type == field.TYPE_MESSAGE:
+        if field.type == field.TYPE_MESSAGE and field.message_type.GetOptions().map_entry:
+            value = dict(value)
+        elif field.type == field.TYPE_MESSAGE:
             if field.is_repeated:
                 value = [_message_to_dict(v) for v in value]
             else:
@@ -279,7 +281,9 @@ class SceneClient:
     def stats(self) -> dict:
         """Server-wide figures since start (GetStats) as a dict: requests,
         failed_requests, rays, rays_hit, invalid_rays, seconds_tracing; the
-        brick cache's (cache_hits, cache_misses, brick_builds, evictions,
+        brick cache's (cache_hits, cache_misses, brick_builds,
+        brick_builds_by_structure (a dict: structure -> builds; with
+        --brick-accel auto, the structures chosen), brick_rebuilds, evictions,
         resident_bytes, peak_resident_bytes, cache_budget_bytes, ...); sums
         over the requests of brick_visits, brick_visits_without_hit,
         proxy_tests, bricks_skipped_by_proxy, bricks_skipped_by_bound,
