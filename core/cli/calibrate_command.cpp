@@ -31,6 +31,7 @@ struct CalibrateArgs {
   uint32_t bricks = 12;
   uint32_t rays = 4096;
   bool quiet = false;
+  bool evaluate = false;
 };
 
 std::vector<std::string> split_commas(const std::string& text) {
@@ -40,9 +41,35 @@ std::vector<std::string> split_commas(const std::string& text) {
   return out;
 }
 
-// Measured (m) and predicted (p) cost of each structure on each sample at a
-// few ray counts, and which one each picks: how well the fit ranks them.
-void print_report(const Calibration& c) {
+// How often `profile`'s choice is within 10 % of the measured best (build
+// + rays x trace, both measured) over the samples at a few ray counts.
+struct Agreement {
+  int within = 0, cases = 0;
+};
+
+Agreement agreement(const Calibration& c, const CostProfile& profile) {
+  Agreement a;
+  const uint64_t ray_counts[] = {0, 1000, 10000, 100000, 1000000, 10000000};
+  for (const uint64_t rays : ray_counts) {
+    for (const CalibrationSample& sample : c.samples) {
+      double measured_min = INFINITY, predicted_min = INFINITY, chosen_cost = INFINITY;
+      for (std::size_t s = 0; s < c.structures.size(); ++s) {
+        const StructureCost* cost = profile.find(c.structures[s]);
+        const double m = sample.measures[s].build_seconds + rays * sample.measures[s].trace_seconds_per_ray;
+        measured_min = std::min(measured_min, m);
+        if (cost == nullptr) continue;
+        const double p =
+            cost->build_seconds(sample.features) + rays * cost->trace_seconds_per_ray(sample.features);
+        if (p < predicted_min) predicted_min = p, chosen_cost = m;
+      }
+      ++a.cases;
+      a.within += chosen_cost <= 1.1 * measured_min;
+    }
+  }
+  return a;
+}
+
+void print_table(const Calibration& c) {
   std::printf("%-58s %9s", "sample", "triangles");
   for (const std::string& s : c.structures) std::printf(" %10s", s.c_str());
   std::printf("\n");
@@ -53,30 +80,13 @@ void print_report(const Calibration& c) {
     for (const StructureMeasure& m : sample.measures) std::printf(" %7.0f ns", m.trace_seconds_per_ray * 1e9);
     std::printf("   trace per ray\n");
   }
-  const uint64_t ray_counts[] = {0, 1000, 100000, 10000000};
-  int agree = 0, total = 0;
-  for (const uint64_t rays : ray_counts) {
-    for (const CalibrationSample& sample : c.samples) {
-      std::size_t measured_best = 0, predicted_best = 0;
-      double measured_min = INFINITY, predicted_min = INFINITY;
-      for (std::size_t s = 0; s < c.structures.size(); ++s) {
-        const double m = sample.measures[s].build_seconds + rays * sample.measures[s].trace_seconds_per_ray;
-        const StructureCost& cost = c.profile.structures[s];
-        const double p =
-            cost.build_seconds(sample.features) + rays * cost.trace_seconds_per_ray(sample.features);
-        if (m < measured_min) measured_min = m, measured_best = s;
-        if (p < predicted_min) predicted_min = p, predicted_best = s;
-      }
-      const StructureMeasure& chosen = sample.measures[predicted_best];
-      const double chosen_cost = chosen.build_seconds + rays * chosen.trace_seconds_per_ray;
-      ++total;
-      agree += chosen_cost <= 1.1 * measured_min;
-      (void)measured_best;
-    }
-  }
+}
+
+void print_agreement(const char* what, const Agreement& a) {
   std::printf(
-      "fit: the predicted choice is within 10%% of the measured best in %d of %d (sample, rays) cases\n",
-      agree, total);
+      "%s: its choice is within 10%% of the measured best in %d of %d (brick, rays) cases (%.0f%%; rays "
+      "0, 1k, 10k, 100k, 1M, 10M)\n",
+      what, a.within, a.cases, a.cases ? 100.0 * a.within / a.cases : 0.0);
 }
 
 int run_calibrate(const CalibrateArgs& args) {
@@ -98,6 +108,15 @@ int run_calibrate(const CalibrateArgs& args) {
   Expected<Calibration> calibration = calibrate(std::move(samples).value(), options);
   progress.finish();
   if (!calibration.ok()) return report_command_error("calibrate", calibration.status().to_string());
+  if (args.evaluate) {
+    // The profile auto would use now, judged on these bricks; nothing written.
+    Expected<CostProfile> current = resolve_cost_profile(args.profile);
+    if (!current.ok()) return report_command_error("calibrate", current.status().to_string());
+    if (!args.quiet) print_table(*calibration);
+    print_agreement(("profile " + current->origin).c_str(), agreement(*calibration, *current));
+    print_agreement("a profile fitted to these bricks", agreement(*calibration, calibration->profile));
+    return 0;
+  }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   CostProfile profile = calibration->profile;
   char host[256] = "unknown";
@@ -117,7 +136,10 @@ int run_calibrate(const CalibrateArgs& args) {
   if (!parent.empty()) std::filesystem::create_directories(parent, ec);
   const Status saved = save_cost_profile(profile, path);
   if (!saved.ok()) return report_command_error("calibrate", saved.to_string());
-  if (!args.quiet) print_report(*calibration);
+  if (!args.quiet) {
+    print_table(*calibration);
+    print_agreement("fit", agreement(*calibration, profile));
+  }
   std::printf("calibrated %zu structures on %zu sample bricks in %.1f s; profile written to %s\n",
               calibration->structures.size(), calibration->samples.size(), seconds, path.c_str());
   return 0;
@@ -146,6 +168,9 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--rays", args->rays, "Incoherent rays traced per sample brick")
       ->capture_default_str()
       ->check(CLI::Range(16, 1 << 22));
+  cmd->add_flag("--evaluate", args->evaluate,
+                "Write nothing: measure, then say how often the current profile (--profile, else the default "
+                "one) chooses within 10% of the measured best on these bricks");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress bar and no table");
   cmd->callback([args, &exit_code] { exit_code = run_calibrate(*args); });
 }
