@@ -93,6 +93,7 @@ class PinnedBrick {
   PinnedBrick& operator=(const PinnedBrick&) = delete;
 
   const BrickAccel& accel() const { return *accel_; }
+  bool pinned() const { return accel_ != nullptr; }
   uint32_t brick_id() const { return brick_; }
   // True when this acquisition found the brick ready (no build, no wait).
   bool was_hit() const { return was_hit_; }
@@ -160,7 +161,7 @@ class BrickCache {
   struct Entry {
     State state = State::kAbsent;
     uint32_t pins = 0;
-    uint64_t bytes = 0;  // accounted (a reservation while building)
+    uint64_t bytes = 0;        // accounted (a reservation while building)
     uint64_t rays_served = 0;  // the acquisitions' rays, summed over the cache's life
     std::unique_ptr<BrickAccel> accel;
   };

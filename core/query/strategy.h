@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <vector>
 
 #include "core/cache/brick_cache.h"
 #include "core/query/batch_scratch.h"
@@ -48,9 +49,11 @@ Status run_sequential(StrategyContext<kKind>& ctx);
 // Every brick pinned, one ResidentBrickSet over them, chunks of rays through it.
 template <QueryKind kKind>
 Status run_resident_set(StrategyContext<kKind>& ctx);
-// Chunks of consecutive rays through all their (resident) bricks, round by round.
+// Chunks of consecutive rays through all their (resident) bricks, round by
+// round. `pinned`: bricks the caller already pinned for this batch (indexed
+// by brick id, or empty), used as they are instead of acquired again.
 template <QueryKind kKind>
-Status run_in_cache_sweep(StrategyContext<kKind>& ctx);
+Status run_in_cache_sweep(StrategyContext<kKind>& ctx, std::vector<PinnedBrick> pinned = {});
 // Rays queued at bricks, resident bricks first, then builds of the longest queues.
 template <QueryKind kKind>
 Status run_queued(StrategyContext<kKind>& ctx);

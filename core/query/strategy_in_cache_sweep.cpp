@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cassert>
 #include <mutex>
 #include <span>
 #include <vector>
@@ -24,12 +25,19 @@ namespace {
 // never per ray.
 class SweepPins {
  public:
-  SweepPins(BrickCache& cache, BatchTally& tally, uint32_t brick_count)
-      : cache_(cache), tally_(tally), pins_(brick_count), pinned_(brick_count), rays_(brick_count) {}
+  SweepPins(BrickCache& cache, BatchTally& tally, uint32_t brick_count, std::vector<PinnedBrick> pinned)
+      : cache_(cache), tally_(tally), pins_(std::move(pinned)), pinned_(brick_count), rays_(brick_count) {
+    if (pins_.empty()) pins_.resize(brick_count);
+    assert(pins_.size() == brick_count);
+    for (uint32_t b = 0; b < brick_count; ++b)
+      if (pins_[b].pinned()) pinned_[b].store(&pins_[b].accel(), std::memory_order_relaxed);
+  }
 
   // Rays traced in `brick` (one relaxed add per group of rays, not per ray),
   // handed to the cache by report_rays() as the bricks' use.
-  void note_rays(uint32_t brick, std::size_t rays) { rays_[brick].fetch_add(rays, std::memory_order_relaxed); }
+  void note_rays(uint32_t brick, std::size_t rays) {
+    rays_[brick].fetch_add(rays, std::memory_order_relaxed);
+  }
   void report_rays() {
     std::vector<uint64_t> rays(rays_.size());
     for (std::size_t b = 0; b < rays.size(); ++b) rays[b] = rays_[b].load(std::memory_order_relaxed);
@@ -159,10 +167,10 @@ void sweep_chunk(const RayWalk<kKind>& walk, SweepPins& pins, SweepScratch& loca
 }  // namespace
 
 template <QueryKind kKind>
-Status run_in_cache_sweep(StrategyContext<kKind>& ctx) {
+Status run_in_cache_sweep(StrategyContext<kKind>& ctx, std::vector<PinnedBrick> pinned) {
   const uint32_t brick_count = ctx.brick_count();
   QueryStats& stats = ctx.tally.stats;
-  SweepPins pins(ctx.cache, ctx.tally, brick_count);
+  SweepPins pins(ctx.cache, ctx.tally, brick_count, std::move(pinned));
   const std::size_t chunks = (ctx.batch.size() + kSweepRays - 1) / kSweepRays;
   std::vector<SweepTask> tasks(chunks);
   const auto t_sweep = Clock::now();
@@ -189,7 +197,7 @@ Status run_in_cache_sweep(StrategyContext<kKind>& ctx) {
   return Status::Ok();
 }
 
-template Status run_in_cache_sweep(StrategyContext<QueryKind::kClosestHit>&);
-template Status run_in_cache_sweep(StrategyContext<QueryKind::kAnyHit>&);
+template Status run_in_cache_sweep(StrategyContext<QueryKind::kClosestHit>&, std::vector<PinnedBrick>);
+template Status run_in_cache_sweep(StrategyContext<QueryKind::kAnyHit>&, std::vector<PinnedBrick>);
 
 }  // namespace outcore

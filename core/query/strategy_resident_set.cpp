@@ -60,8 +60,11 @@ Status run_resident_set(StrategyContext<kKind>& ctx) {
   const auto t_set = Clock::now();
   OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<ResidentBrickSet> set,
                            ctx.cache.builder().make_resident_set(accels));
-  // The planner asked resident_set_max_bricks(): a builder that offers one makes one.
-  if (set == nullptr) return internal_error("the brick structure offered a resident set but made none");
+  if (set == nullptr) {
+    // The builder offers sets but not for these bricks (auto, when they
+    // chose different structures): the batch is swept through them instead.
+    return run_in_cache_sweep(ctx, std::move(pins));
+  }
   stats.seconds_upper += seconds_since(t_set);
   const auto t_trace = Clock::now();
   const std::size_t chunks = (batch.size() + kSweepRays - 1) / kSweepRays;

@@ -161,6 +161,29 @@ std::string_view AutoBrickBuilder::structure_of(const BrickAccel& accel) const {
   return built != nullptr ? std::string_view(candidate_names_[built->candidate()]) : std::string_view(name_);
 }
 
+uint32_t AutoBrickBuilder::resident_set_max_bricks() const {
+  uint32_t most = 0;
+  for (const auto& builder : builders_) most = std::max(most, builder->resident_set_max_bricks());
+  return most;
+}
+
+Expected<std::unique_ptr<ResidentBrickSet>> AutoBrickBuilder::make_resident_set(
+    std::span<const BrickAccel* const> bricks) const {
+  if (bricks.empty()) return std::unique_ptr<ResidentBrickSet>();
+  std::vector<const BrickAccel*> inner(bricks.size());
+  uint32_t candidate = 0;
+  for (std::size_t b = 0; b < bricks.size(); ++b) {
+    const auto* built = dynamic_cast<const AutoBrickAccel*>(bricks[b]);
+    if (built == nullptr) return std::unique_ptr<ResidentBrickSet>();
+    if (b == 0) candidate = built->candidate();
+    if (built->candidate() != candidate) return std::unique_ptr<ResidentBrickSet>();
+    inner[b] = &built->inner();
+  }
+  if (bricks.size() > builders_[candidate]->resident_set_max_bricks())
+    return std::unique_ptr<ResidentBrickSet>();
+  return builders_[candidate]->make_resident_set(inner);
+}
+
 uint64_t AutoBrickBuilder::reserve_bytes(uint32_t triangle_count) const {
   uint64_t most = 0;
   for (const auto& builder : builders_) most = std::max(most, builder->reserve_bytes(triangle_count));

@@ -77,6 +77,13 @@ class AutoBrickBuilder final : public BrickBuilder {
   const std::string& name() const override { return name_; }
   const BrickSerializer* serializer() const override { return serializer_.get(); }
   double hit_rounding_scale() const override { return hit_rounding_scale_; }
+  // A resident set exists when every brick chose the same candidate and that
+  // candidate offers one (the bvh's): the set is that candidate's, over the
+  // bricks' own structures. A mix gets none (nullptr; the engine then sweeps
+  // the batch through the bricks instead).
+  uint32_t resident_set_max_bricks() const override;
+  Expected<std::unique_ptr<ResidentBrickSet>> make_resident_set(
+      std::span<const BrickAccel* const> bricks) const override;
 
   // The candidate of least predicted cost for a brick with `features` that
   // is to serve `rays` rays (ties: the earlier candidate).

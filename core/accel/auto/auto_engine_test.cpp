@@ -9,6 +9,8 @@
 
 #include <cstring>
 #include <fstream>
+#include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -153,6 +155,51 @@ TEST_F(AutoEngine, BricksUsedAgainAndAgainAreRebuiltAsBetterStructuresWithTheSam
     EXPECT_GT(rebuilds, 0u) << (sweep ? "swept" : "queued");
     EXPECT_GT(bvh_builds, 0u) << "many rays over time: the cheapest trace";
   }
+}
+
+TEST_F(AutoEngine, LargeWarmBatchesUseTheResidentSetOnlyWhenEveryBrickChoseTheBvh) {
+  // Few enough bricks for a resident set. The first batch is small (each
+  // brick built cheap, as grids); the large batches after it find a mix, so
+  // the engine sweeps them through the bricks instead (each brick acquired
+  // once a batch), until their rays have made auto rebuild every brick as a
+  // bvh; then they go through the bvh's resident set.
+  const std::unique_ptr<Packed> small =
+      testing::pack_test_scene({testing::model_path("stanford-bunny.obj")}, 16384);
+  QueryOptions large;
+  large.brick_set_min_rays = 1000;
+  const std::vector<Ray> few = testing::make_test_rays(small->bounds, 300, 21);
+  const std::vector<Ray> rays = testing::make_test_rays(small->bounds, 4000, 22);
+  std::vector<Hit> want(rays.size());
+  {
+    auto bvh = QueryEngine::open(small->path, with_accel("bvh"));
+    ASSERT_TRUE(bvh.ok());
+    ASSERT_TRUE((*bvh)->intersect(rays, want, large).ok());
+  }
+  auto engine = QueryEngine::open(small->path, with_accel("auto"));
+  ASSERT_TRUE(engine.ok()) << engine.status().to_string();
+  const uint32_t bricks = (*engine)->store().brick_count();
+  ASSERT_LE(bricks, 16u);
+  std::vector<Hit> hits(rays.size());
+  QueryStats first;
+  ASSERT_TRUE((*engine)->intersect(std::span(few), std::span(hits.data(), few.size()), large, &first).ok());
+  EXPECT_GT(first.builds_grid, 0u) << first.to_json();
+  bool swept = false, set = false;
+  for (int batch = 0; batch < 60 && !set; ++batch) {
+    QueryStats stats;
+    ASSERT_TRUE((*engine)->intersect(rays, hits, large, &stats).ok());
+    EXPECT_EQ(std::memcmp(hits.data(), want.data(), hits.size() * sizeof(Hit)), 0) << "batch " << batch;
+    // Every brick resident: one acquisition a brick, never two.
+    EXPECT_EQ(stats.brick_acquisitions, bricks) << stats.to_json();
+    if (stats.rays_in_brick_set == 0) {
+      swept = true;
+      EXPECT_GT(stats.brick_visits, 0u);
+    } else {
+      set = true;
+      EXPECT_EQ(stats.rays_in_brick_set, rays.size());
+    }
+  }
+  EXPECT_TRUE(swept) << "a mix of structures is swept";
+  EXPECT_TRUE(set) << "once every brick is a bvh, its resident set serves";
 }
 
 TEST_F(AutoEngine, ASubtreeTierKeepsTheChosenStructuresAndTheAnswers) {
