@@ -2,7 +2,8 @@
 """Subtree tier at 100 M triangles: warm-batch throughput at a quarter of the
 built size against the unlimited budget, rounds interleaved, medians.
 
-Each round runs `outcore trace --brick-accel bvh --threads 2` processes on the
+Each round runs `outcore trace --brick-accel bvh --threads 2` (or the
+--brick-accel given) processes on the
 same store and rays:
   unlimited   --cache-mb 65536, no tier (the peer: heap-built bricks)
   tier        --cache-mb BUILT/4 --subtree-dir on a fresh directory (batch 1
@@ -23,6 +24,7 @@ camera's own built size). Heavy runs are ordered so that the tier's files
 stay in the page cache while tier runs are measured.
 
 Usage: subtree_tier_100m.py WORK_DIR [--rounds 3] [--repeat 5] [--no-camera] [--compare-unbatched]
+       [--brick-accel bvh|auto|...] [--policies lru,gdsf] [--sweep 0.0625,0.125,0.5,1]
 The store (WORK_DIR/city4883.oc, `gen:city?of=(gen:sphere?level=5)&copies=4883`,
 4.1 GiB) and the 1 M-ray files are made on first use.
 """
@@ -42,9 +44,12 @@ sys.path.insert(0, str(ROOT / "bench"))
 import common  # noqa: E402
 
 
+BRICK_ACCEL = "bvh"
+
+
 def run_trace(outcore, work, rays, out, budget_mb, repeat, extra, log):
     stats = work / (out + ".json")
-    cmd = [str(outcore), "trace", "city4883.oc", "--rays", rays, "-o", out + ".npy", "--brick-accel", "bvh",
+    cmd = [str(outcore), "trace", "city4883.oc", "--rays", rays, "-o", out + ".npy", "--brick-accel", BRICK_ACCEL,
            "--cache-mb", str(budget_mb), "--threads", "2", "--repeat", str(repeat), "--stats-json",
            stats.name] + extra
     start = time.time()
@@ -62,10 +67,14 @@ def run_trace(outcore, work, rays, out, budget_mb, repeat, extra, log):
         "checked": [r.get("subtree_loads_checked", 0) for r in runs],
         "built_mib": runs[0]["peak_bytes_resident"] / 2**20,
         "rss_mib": usage.ru_maxrss / 1024,
+        "builds_by_structure": {k: sum(r.get("brick_builds_by_structure", {}).get(k, 0) for r in runs)
+                                for k in runs[0].get("brick_builds_by_structure", {})},
+        "rebuilds": sum(r.get("brick_rebuilds", 0) for r in runs),
         "wall": time.time() - start,
     }
     log(f"  {out:<22} warm {row['warm']:.3f} s  batches {[round(b, 3) for b in row['batches']]}  "
-        f"builds {row['builds']}  loads {row['loads']}  RSS {row['rss_mib']:.0f} MiB  ({row['wall']:.0f} s)")
+        f"builds {row['builds']}  loads {row['loads']}  RSS {row['rss_mib']:.0f} MiB  ({row['wall']:.0f} s)"
+        + (f"  by structure {row['builds_by_structure']} rebuilds {row['rebuilds']}" if BRICK_ACCEL == "auto" else ""))
     return row
 
 
@@ -78,11 +87,14 @@ def main():
     ap.add_argument("--outcore", type=Path, default=ROOT / "build/client/outcore")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--no-camera", action="store_true")
+    ap.add_argument("--brick-accel", default="bvh", help="the structure every run uses (bvh, auto, ...)")
     ap.add_argument("--compare-unbatched", action="store_true",
                     help="also a restarted lru run with --subtree-release-batch-mb 0 in every round")
     ap.add_argument("--sweep", default="0.0625,0.125,0.5,1",
                     help="first round only: restarted lru runs at these fractions of the built size")
     args = ap.parse_args()
+    global BRICK_ACCEL
+    BRICK_ACCEL = args.brick_accel
     work = args.work.resolve()
     work.mkdir(parents=True, exist_ok=True)
     _, info = common.prepare_store(str(args.outcore), str(work), "city4883",

@@ -1,0 +1,197 @@
+#include "core/dynamic/dynamic_snapshot.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <cassert>
+#include <cmath>
+#include <limits>
+#include <unordered_set>
+
+#include "core/accel/bvh/triangle_test_kind.h"
+#include "core/accel/bvh/wide_bvh_refit.h"
+#include "core/accel/bvh/wide_bvh_top_level.h"
+#include "core/accel/bvh/wide_bvh_trace.h"
+#include "core/ray/query_types.h"
+
+namespace outcore {
+namespace {
+
+constexpr std::size_t kRaysPerTask = 1024;
+// Enough for any top level build_wide_top_level makes (median splits: depth
+// about log8 of the instances; 7 entries pushed a level).
+constexpr std::size_t kTopStack = 512;
+
+// The ray in double with its world-box slack.
+struct WorldRay {
+  Vec3d origin, direction;
+  double pad = 0;
+};
+
+WorldRay world_ray(const Ray& ray, double slack, double scene_magnitude) {
+  WorldRay r{Vec3d(ray.origin), Vec3d(ray.direction), 0};
+  r.pad = slack * (max_abs(r.origin) + scene_magnitude) + std::numeric_limits<float>::denorm_min();
+  return r;
+}
+
+// Whether the ray may meet the box, widened by the ray's pad, within [t0, t1].
+bool may_enter(const WorldRay& r, const Aabb& box, double t0, double t1) {
+  for (int a = 0; a < 3; ++a) {
+    const double lo = static_cast<double>(box.lo[a]) - r.pad, hi = static_cast<double>(box.hi[a]) + r.pad;
+    const double o = r.origin[a], d = r.direction[a];
+    if (d == 0.0) {
+      if (o < lo || o > hi) return false;
+      continue;
+    }
+    double near = (lo - o) / d, far = (hi - o) / d;
+    if (near > far) std::swap(near, far);
+    t0 = std::max(t0, near);
+    t1 = std::min(t1, far);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+// Calls visit(instance index) for every instance whose widened world box the
+// ray may meet within [tnear, limit()] (limit re-read as hits shrink it).
+template <typename Limit, typename Visit>
+void walk_top(const DynamicSnapshot& s, const WorldRay& r, double tnear, const Limit& limit,
+              const Visit& visit) {
+  if (s.top.empty()) return;
+  std::array<uint32_t, kTopStack> stack;
+  std::size_t depth = 0;
+  stack[depth++] = 0;
+  while (depth > 0) {
+    const WideBvhNode& node = s.top[stack[--depth]];
+    const uint8_t used = node.child_mask();
+    for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
+      if (!((used >> k) & 1u) || !may_enter(r, node.box(k), tnear, limit())) continue;
+      if ((node.inner_mask >> k) & 1u) {
+        assert(depth < kTopStack);
+        stack[depth++] = node.child[k];
+      } else if (!visit(node.child[k])) {
+        return;
+      }
+    }
+  }
+}
+
+double scene_magnitude(const DynamicSnapshot& s) {
+  if (s.top.empty()) return 0;
+  Aabb box;
+  for (uint32_t k = 0; k < kWideBvhWidth; ++k)
+    if ((s.top[0].child_mask() >> k) & 1u) box.extend(s.top[0].box(k));
+  return std::max(max_abs(Vec3d(box.lo)), max_abs(Vec3d(box.hi)));
+}
+
+double max_slack(const DynamicSnapshot& s) {
+  double slack = 0;
+  for (const DynamicInstance& instance : s.instances) slack = std::max(slack, instance.slack);
+  return slack;
+}
+
+template <typename Body>
+void for_ray_chunks(std::size_t n, const Body& body) {
+  tbb::parallel_for(std::size_t{0}, (n + kRaysPerTask - 1) / kRaysPerTask, [&](std::size_t c) {
+    const std::size_t end = std::min(n, (c + 1) * kRaysPerTask);
+    for (std::size_t i = c * kRaysPerTask; i < end; ++i) body(i);
+  });
+}
+
+}  // namespace
+
+void DynamicSnapshot::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
+  assert(hits.size() >= rays.size());
+  if (instances.empty()) return;
+  const double slack = max_slack(*this), magnitude = scene_magnitude(*this);
+  const SimdPath path = active_simd_path();
+  for_ray_chunks(rays.size(), [&](std::size_t i) {
+    const Ray& ray = rays[i];
+    Hit& best = hits[i];
+    if (!(ray.tnear <= ray.tfar)) return;
+    const WorldRay r = world_ray(ray, slack, magnitude);
+    const auto limit = [&] { return std::min(static_cast<double>(ray.tfar), static_cast<double>(best.t)); };
+    walk_top(*this, r, ray.tnear, limit, [&](uint32_t index) {
+      const DynamicInstance& instance = instances[index];
+      Ray local = instance.to_object.ray_to_object(ray);
+      local.tfar = std::min(ray.tfar, best.t);
+      Hit hit;
+      const uint32_t id = 0;
+      wide_bvh_intersect(path, TriangleTest::kWatertight, meshes[instance.mesh_id]->view(), {&id, 1}, &local,
+                         &hit);
+      if (hit.is_hit() && hit_is_better(hit.t, instance.geometry_id, hit.primitive_id, best)) {
+        hit.geometry_id = instance.geometry_id;
+        hit.normal = instance.to_object.normal_to_world(hit.normal);
+        best = hit;
+      }
+      return true;
+    });
+  });
+}
+
+void DynamicSnapshot::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
+  assert(occluded.size() >= rays.size());
+  if (instances.empty()) return;
+  const double slack = max_slack(*this), magnitude = scene_magnitude(*this);
+  const SimdPath path = active_simd_path();
+  for_ray_chunks(rays.size(), [&](std::size_t i) {
+    const Ray& ray = rays[i];
+    if (occluded[i] != 0 || !(ray.tnear <= ray.tfar)) return;
+    const WorldRay r = world_ray(ray, slack, magnitude);
+    const auto limit = [&] { return static_cast<double>(ray.tfar); };
+    walk_top(*this, r, ray.tnear, limit, [&](uint32_t index) {
+      const DynamicInstance& instance = instances[index];
+      const Ray local = instance.to_object.ray_to_object(ray);
+      const uint32_t id = 0;
+      uint8_t hit = 0;
+      wide_bvh_occluded(path, TriangleTest::kWatertight, meshes[instance.mesh_id]->view(), {&id, 1}, &local,
+                        &hit);
+      occluded[i] = hit;
+      return hit == 0;
+    });
+  });
+}
+
+const DynamicInstance* DynamicSnapshot::find(uint32_t geometry_id) const {
+  const auto it = std::lower_bound(instances.begin(), instances.end(), geometry_id,
+                                   [](const DynamicInstance& i, uint32_t id) { return i.geometry_id < id; });
+  return it != instances.end() && it->geometry_id == geometry_id ? &*it : nullptr;
+}
+
+uint64_t DynamicSnapshot::triangle_count() const {
+  uint64_t n = 0;
+  for (const DynamicInstance& instance : instances) n += meshes[instance.mesh_id]->triangle_count();
+  return n;
+}
+
+uint64_t DynamicSnapshot::memory_bytes() const {
+  uint64_t bytes = sizeof(*this) + instances.capacity() * sizeof(DynamicInstance) +
+                   top.capacity() * sizeof(WideBvhNode) + meshes.capacity() * sizeof(meshes[0]);
+  for (const auto& mesh : meshes)
+    if (mesh != nullptr) bytes += mesh->memory_bytes();
+  return bytes;
+}
+
+namespace {
+std::vector<Aabb> world_boxes(const DynamicSnapshot& s) {
+  std::vector<Aabb> boxes(s.instances.size());
+  for (std::size_t i = 0; i < boxes.size(); ++i) boxes[i] = s.instances[i].world_box;
+  return boxes;
+}
+}  // namespace
+
+void build_dynamic_top_level(DynamicSnapshot& snapshot) {
+  snapshot.top = build_wide_top_level(world_boxes(snapshot));
+  snapshot.top_built_cost = wide_bvh_sah_cost(snapshot.top);
+}
+
+bool refit_dynamic_top_level(DynamicSnapshot& snapshot) {
+  const std::vector<Aabb> boxes = world_boxes(snapshot);
+  refit_wide_top_level(snapshot.top, boxes);
+  if (wide_bvh_sah_cost(snapshot.top) <= DynamicMesh::kRebuildRatio * snapshot.top_built_cost) return false;
+  build_dynamic_top_level(snapshot);
+  return true;
+}
+
+}  // namespace outcore

@@ -1,0 +1,70 @@
+// DynamicSnapshot: one version of the dynamic layer — its meshes, the live
+// instances (a mesh placed by an affine transform, with a geometry id of
+// its own) and a top-level 8-wide BVH over the instances' world boxes — and
+// the ray queries over it. Immutable: DynamicScene (dynamic_scene.h) makes a
+// new snapshot for every update, so a query that holds one sees exactly that
+// version, never a mix.
+//
+// A ray walks the top level (boxes tested in double, widened by the slack
+// of the ray's trip into an instance's frame), and at each instance it may
+// hit, is taken into the instance's frame (AffineTransform::ray_to_object,
+// same t) and traced through the mesh's tree with the watertight test; a hit
+// gets the instance's geometry id and a world normal and is kept under
+// hit_is_better's tie rule, so the answer does not depend on the order in
+// which instances are visited, on the top level's shape, or on whether a
+// tree was refitted or built.
+//
+// Thread-safety: immutable; intersect()/occluded() from any threads.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "core/accel/bvh/wide_bvh.h"
+#include "core/dynamic/dynamic_mesh.h"
+#include "core/geometry/affine_transform.h"
+#include "core/ray/ray_types.h"
+
+namespace outcore {
+
+struct DynamicInstance {
+  uint32_t geometry_id = 0;
+  uint32_t mesh_id = 0;
+  AffineTransform to_world;
+  AffineTransform to_object;  // to_world's inverse
+  Aabb world_box;
+  // Relative slack of a world box test for a ray of this instance
+  // (to_world's condition number x a few float ulps).
+  double slack = 0;
+};
+
+struct DynamicSnapshot {
+  uint64_t version = 0;
+  std::vector<std::shared_ptr<const DynamicMesh>> meshes;  // by mesh id
+  std::vector<DynamicInstance> instances;                  // live ones, by geometry id
+  std::vector<WideBvhNode> top;                            // leaf child = index into instances
+  double top_built_cost = 0;                               // the top level's cost when last built
+
+  // For each ray: the closest dynamic hit within [tnear, min(tfar, hits[i].t)],
+  // replacing hits[i] when hit_is_better says so (so hits may hold the
+  // static scene's answers, merged under the same tie rule).
+  void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
+  // For each ray with occluded[i] == 0: 1 when it hits dynamic geometry.
+  void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
+
+  // The instance with this geometry id, or nullptr.
+  const DynamicInstance* find(uint32_t geometry_id) const;
+  uint64_t triangle_count() const;  // over live instances
+  uint64_t memory_bytes() const;    // meshes counted once
+};
+
+// Builds `snapshot.top` afresh over its instances' world boxes.
+void build_dynamic_top_level(DynamicSnapshot& snapshot);
+// Refits `snapshot.top` to its instances' world boxes (same instances in the
+// same order); builds afresh when the refitted cost exceeds
+// DynamicMesh::kRebuildRatio x top_built_cost. Returns whether it rebuilt.
+bool refit_dynamic_top_level(DynamicSnapshot& snapshot);
+
+}  // namespace outcore
