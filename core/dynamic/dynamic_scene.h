@@ -32,6 +32,9 @@
 
 namespace outcore {
 
+// "The latest version" where a version number is asked for.
+inline constexpr uint64_t kLatestDynamicVersion = ~uint64_t{0};
+
 class DynamicScene {
  public:
   static constexpr std::size_t kKeptVersions = 16;

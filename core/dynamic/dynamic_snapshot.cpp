@@ -4,16 +4,17 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cassert>
 #include <cmath>
 #include <limits>
-#include <unordered_set>
 
 #include "core/accel/bvh/triangle_test_kind.h"
 #include "core/accel/bvh/wide_bvh_refit.h"
 #include "core/accel/bvh/wide_bvh_top_level.h"
 #include "core/accel/bvh/wide_bvh_trace.h"
 #include "core/ray/query_types.h"
+#include "core/ray/ray_problem.h"
 
 namespace outcore {
 namespace {
@@ -91,25 +92,32 @@ double max_slack(const DynamicSnapshot& s) {
   return slack;
 }
 
+// Runs body(i) for every valid ray (invalid ones are misses, as in the
+// static scene), in parallel chunks; returns how many calls returned true.
 template <typename Body>
-void for_ray_chunks(std::size_t n, const Body& body) {
-  tbb::parallel_for(std::size_t{0}, (n + kRaysPerTask - 1) / kRaysPerTask, [&](std::size_t c) {
-    const std::size_t end = std::min(n, (c + 1) * kRaysPerTask);
-    for (std::size_t i = c * kRaysPerTask; i < end; ++i) body(i);
+uint64_t for_valid_rays(std::span<const Ray> rays, const Body& body) {
+  std::atomic<uint64_t> count{0};
+  tbb::parallel_for(std::size_t{0}, (rays.size() + kRaysPerTask - 1) / kRaysPerTask, [&](std::size_t c) {
+    const std::size_t end = std::min(rays.size(), (c + 1) * kRaysPerTask);
+    uint64_t chunk = 0;
+    for (std::size_t i = c * kRaysPerTask; i < end; ++i)
+      if (ray_is_valid(rays[i])) chunk += body(i);
+    count.fetch_add(chunk, std::memory_order_relaxed);
   });
+  return count.load();
 }
 
 }  // namespace
 
-void DynamicSnapshot::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
+uint64_t DynamicSnapshot::intersect(std::span<const Ray> rays, std::span<Hit> hits) const {
   assert(hits.size() >= rays.size());
-  if (instances.empty()) return;
+  if (instances.empty()) return 0;
   const double slack = max_slack(*this), magnitude = scene_magnitude(*this);
   const SimdPath path = active_simd_path();
-  for_ray_chunks(rays.size(), [&](std::size_t i) {
+  return for_valid_rays(rays, [&](std::size_t i) {
     const Ray& ray = rays[i];
     Hit& best = hits[i];
-    if (!(ray.tnear <= ray.tfar)) return;
+    const bool was_hit = best.is_hit();
     const WorldRay r = world_ray(ray, slack, magnitude);
     const auto limit = [&] { return std::min(static_cast<double>(ray.tfar), static_cast<double>(best.t)); };
     walk_top(*this, r, ray.tnear, limit, [&](uint32_t index) {
@@ -127,17 +135,18 @@ void DynamicSnapshot::intersect(std::span<const Ray> rays, std::span<Hit> hits) 
       }
       return true;
     });
+    return !was_hit && best.is_hit();
   });
 }
 
-void DynamicSnapshot::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
+uint64_t DynamicSnapshot::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const {
   assert(occluded.size() >= rays.size());
-  if (instances.empty()) return;
+  if (instances.empty()) return 0;
   const double slack = max_slack(*this), magnitude = scene_magnitude(*this);
   const SimdPath path = active_simd_path();
-  for_ray_chunks(rays.size(), [&](std::size_t i) {
+  return for_valid_rays(rays, [&](std::size_t i) {
     const Ray& ray = rays[i];
-    if (occluded[i] != 0 || !(ray.tnear <= ray.tfar)) return;
+    if (occluded[i] != 0) return false;
     const WorldRay r = world_ray(ray, slack, magnitude);
     const auto limit = [&] { return static_cast<double>(ray.tfar); };
     walk_top(*this, r, ray.tnear, limit, [&](uint32_t index) {
@@ -150,6 +159,7 @@ void DynamicSnapshot::occluded(std::span<const Ray> rays, std::span<uint8_t> occ
       occluded[i] = hit;
       return hit == 0;
     });
+    return occluded[i] != 0;
   });
 }
 

@@ -49,10 +49,12 @@ struct DynamicSnapshot {
 
   // For each ray: the closest dynamic hit within [tnear, min(tfar, hits[i].t)],
   // replacing hits[i] when hit_is_better says so (so hits may hold the
-  // static scene's answers, merged under the same tie rule).
-  void intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
-  // For each ray with occluded[i] == 0: 1 when it hits dynamic geometry.
-  void occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
+  // static scene's answers, merged under the same tie rule). Invalid rays
+  // (ray_problem.h) are left as they are. Returns how many misses became hits.
+  uint64_t intersect(std::span<const Ray> rays, std::span<Hit> hits) const;
+  // For each valid ray with occluded[i] == 0: 1 when it hits dynamic
+  // geometry. Returns how many became 1.
+  uint64_t occluded(std::span<const Ray> rays, std::span<uint8_t> occluded) const;
 
   // The instance with this geometry id, or nullptr.
   const DynamicInstance* find(uint32_t geometry_id) const;

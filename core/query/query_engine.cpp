@@ -22,7 +22,8 @@ QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_pt
       cache_fits_scene_(cache_fits_scene),
       bricks_budget_holds_(bricks_budget_holds),
       upper_walks_(std::make_unique<const UpperWalks>(store_->manifest().upper)),
-      scratch_pool_(kKeptScratches, keep_batch_scratch) {}
+      scratch_pool_(kKeptScratches, keep_batch_scratch),
+      dynamic_(static_cast<uint32_t>(store_->manifest().inputs.size())) {}
 
 QueryEngine::~QueryEngine() = default;
 
@@ -102,6 +103,22 @@ Status QueryEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occlu
 
 namespace {
 
+// The dynamic layer after the static scene, merged into its answers.
+template <QueryKind kKind>
+void trace_dynamic(const DynamicSnapshot& dynamic, std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
+                   QueryStats& stats) {
+  stats.dynamic_version = dynamic.version;
+  stats.dynamic_instances = dynamic.instances.size();
+  if (dynamic.instances.empty()) return;
+  const auto start = Clock::now();
+  const uint64_t newly_hit = kKind == QueryKind::kClosestHit
+                                 ? dynamic.intersect(rays, {hits, rays.size()})
+                                 : dynamic.occluded(rays, {occluded, rays.size()});
+  stats.rays_hit += newly_hit;
+  stats.rays_hit_only_dynamic += newly_hit;
+  stats.seconds_dynamic += seconds_since(start);
+}
+
 template <QueryKind kKind>
 Status run_strategy(BatchStrategy strategy, StrategyContext<kKind>& ctx) {
   switch (strategy) {
@@ -128,6 +145,10 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   BatchTally tally;
   tally.stats.rays = n;
 
+  OUTCORE_ASSIGN_OR_RETURN(const std::shared_ptr<const DynamicSnapshot> dynamic,
+                           options.dynamic_version == kLatestDynamicVersion
+                               ? dynamic_.latest()
+                               : dynamic_.at(options.dynamic_version));
   const ReusePool<BatchScratch>::Lease scratch = scratch_pool_.take();
   const BatchPlan plan =
       plan_batch(options, {.rays = n,
@@ -167,6 +188,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       batch,           walk, *cache_, *store_, gate, demand, *scratch, options, bricks_budget_holds_,
       counters_before, tally};
   OUTCORE_RETURN_IF_ERROR(run_strategy(plan.strategy, ctx));
+  trace_dynamic<kKind>(*dynamic, rays, hits, occluded, tally.stats);
 
   // The batch's evicted bricks hold no pages past its end.
   cache_->release_evicted_pages();

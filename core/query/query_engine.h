@@ -46,6 +46,7 @@
 
 #include "core/accel/brick_accel_factory.h"
 #include "core/cache/brick_cache.h"
+#include "core/dynamic/dynamic_scene.h"
 #include "core/proxy/proxy_builder.h"
 #include "core/proxy/proxy_set.h"
 #include "core/query/query_stats.h"
@@ -119,6 +120,9 @@ struct QueryOptions {
   // batches take the sweep: the set is made per batch.
   bool brick_set = true;
   std::size_t brick_set_min_rays = 16384;
+  // The dynamic layer's version the batch sees (DynamicScene::at); the
+  // latest when the batch starts by default.
+  uint64_t dynamic_version = kLatestDynamicVersion;
 };
 
 class QueryEngine {
@@ -146,6 +150,13 @@ class QueryEngine {
   const BrickAccelOptions& accel_options() const { return accel_options_; }
   // Whether the budget holds every brick at once (by their reservations).
   bool cache_fits_scene() const { return cache_fits_scene_; }
+  // The dynamic layer (core/dynamic/dynamic_scene.h): meshes and instances
+  // added at run time beside the static store; every batch traces the
+  // static scene, then the version of the layer it names, and keeps the
+  // nearer hit under the same tie rule. Dynamic geometry ids continue after
+  // the store's inputs.
+  DynamicScene& dynamic() { return dynamic_; }
+  const DynamicScene& dynamic() const { return dynamic_; }
 
   ~QueryEngine();
 
@@ -172,6 +183,7 @@ class QueryEngine {
   // Per-batch working memory kept for the next batch, so that warm batches
   // neither allocate nor page-fault it.
   ReusePool<BatchScratch> scratch_pool_;
+  DynamicScene dynamic_;
 };
 
 }  // namespace outcore

@@ -102,6 +102,11 @@ enum class StatsServer { kNo, kYes };
   X(uint64_t, subtree_rejects,         "",        "subtree_rejects",         kSum, kYes, kNo)       \
   X(uint64_t, subtree_bytes_read,      "",        "subtree_bytes_read",      kSum, kYes, kNo)       \
   X(uint64_t, subtree_bytes_written,   "",        "subtree_bytes_written",   kSum, kYes, kNo)       \
+  /* the dynamic layer's version the query saw, its live instances, and */                           \
+  /* rays whose answer came from it (misses the static scene left) */                               \
+  X(uint64_t, dynamic_version,         "dynamic", "version",                 kMax, kNo,  kNo)       \
+  X(uint64_t, dynamic_instances,       "dynamic", "instances",               kMax, kNo,  kNo)       \
+  X(uint64_t, rays_hit_only_dynamic,   "dynamic", "rays_hit_only_dynamic",   kSum, kNo,  kNo)       \
   X(uint64_t, peak_bytes_resident,     "",        "peak_bytes_resident",     kMax, kNo,  kNo)       \
   X(uint64_t, cache_budget_bytes,      "",        "cache_budget_bytes",      kMax, kNo,  kNo)       \
   X(double,   seconds_total,           "seconds", "total",                   kSum, kYes, kYes)      \
@@ -116,7 +121,9 @@ enum class StatsServer { kNo, kYes };
   /* summed over threads: store load + build of the bricks built, and */                            \
   /* subtree file load + deserialise of the bricks loaded instead */                                \
   X(double,   seconds_brick_builds,    "seconds", "brick_builds_summed",     kSum, kYes, kNo)       \
-  X(double,   seconds_subtree_loads,   "seconds", "subtree_loads_summed",    kSum, kYes, kNo)
+  X(double,   seconds_subtree_loads,   "seconds", "subtree_loads_summed",    kSum, kYes, kNo)       \
+  /* tracing the dynamic layer (after the static scene) */                                          \
+  X(double,   seconds_dynamic,         "seconds", "dynamic",                 kSum, kNo,  kNo)
 // clang-format on
 
 // What the list says about one figure.
