@@ -95,6 +95,7 @@ def main():
     args = ap.parse_args()
     global BRICK_ACCEL
     BRICK_ACCEL = args.brick_accel
+    args.outcore = args.outcore.resolve()  # the runs' working directory is WORK_DIR
     work = args.work.resolve()
     work.mkdir(parents=True, exist_ok=True)
     _, info = common.prepare_store(str(args.outcore), str(work), "city4883",

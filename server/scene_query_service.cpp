@@ -102,10 +102,11 @@ grpc::Status SceneQueryService::check_still_wanted(grpc::ServerContext* context,
 
 template <QueryKind kKind>
 Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v1::QueryRequest& request,
-                                QueryStats* stats) {
+                                const std::shared_ptr<const DynamicSnapshot>& dynamic, QueryStats* stats) {
   QueryOptions query_options;
   query_options.reorder = !request.no_reorder();
   query_options.strict = request.strict();
+  query_options.dynamic_snapshot = dynamic;
   const uint64_t n = rays.size();
   Status status;
   if constexpr (kKind == QueryKind::kClosestHit) {
@@ -127,10 +128,19 @@ Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v
 
 // The shared-memory call and the streams (shared_memory_call.cpp,
 // streamed_call.cpp) trace with these.
-template Status SceneQueryService::trace<QueryKind::kClosestHit>(std::span<const Ray>, uint8_t*,
-                                                                 const v1::QueryRequest&, QueryStats*);
+template Status SceneQueryService::trace<QueryKind::kClosestHit>(
+    std::span<const Ray>, uint8_t*, const v1::QueryRequest&, const std::shared_ptr<const DynamicSnapshot>&,
+    QueryStats*);
 template Status SceneQueryService::trace<QueryKind::kAnyHit>(std::span<const Ray>, uint8_t*,
-                                                             const v1::QueryRequest&, QueryStats*);
+                                                             const v1::QueryRequest&,
+                                                             const std::shared_ptr<const DynamicSnapshot>&,
+                                                             QueryStats*);
+
+Expected<std::shared_ptr<const DynamicSnapshot>> SceneQueryService::dynamic_for(
+    const v1::QueryRequest& request) const {
+  if (!request.has_dynamic_version()) return engine_.dynamic().latest();
+  return engine_.dynamic().at(request.dynamic_version());
+}
 template Expected<std::span<const Ray>> SceneQueryService::check_request<QueryKind::kClosestHit>(
     const v1::QueryRequest&, const BatchPosition&, std::vector<Ray>&) const;
 template Expected<std::span<const Ray>> SceneQueryService::check_request<QueryKind::kAnyHit>(
@@ -151,15 +161,19 @@ grpc::Status SceneQueryService::answer(grpc::ServerContext* context, const v1::Q
   if (!rays.ok()) return to_grpc_status(rays.status());
   const uint64_t n = rays->size();
   OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, where(position), n));
+  auto dynamic = dynamic_for(request);
+  if (!dynamic.ok()) return to_grpc_status(dynamic.status().with_context("request.dynamic_version"));
   std::string* payload = Traits::payload(response);
   payload->resize(n * Traits::kReplyBytesPerRay);
   QueryStats stats;
-  const Status status = trace<kKind>(*rays, reinterpret_cast<uint8_t*>(payload->data()), request, &stats);
+  const Status status =
+      trace<kKind>(*rays, reinterpret_cast<uint8_t*>(payload->data()), request, *dynamic, &stats);
   if (!status.ok()) {
     payload->clear();
     return to_grpc_status(status);
   }
   set_reply_header(response, n, request.sequence());
+  response->set_dynamic_version((*dynamic)->version);
   wire::to_wire(stats, response->mutable_stats());
   return grpc::Status::OK;
 }

@@ -109,6 +109,17 @@ class SceneQueryService final : public SceneQueryBase {
                             v1::SceneInfo* response) override;
   grpc::Status GetStats(grpc::ServerContext* context, const v1::GetStatsRequest* request,
                         v1::ServerStats* response) override;
+  // The dynamic layer (dynamic_calls.cpp).
+  grpc::Status AddMesh(grpc::ServerContext* context, const v1::AddMeshRequest* request,
+                       v1::AddMeshResponse* response) override;
+  grpc::Status AddInstance(grpc::ServerContext* context, const v1::AddInstanceRequest* request,
+                           v1::AddInstanceResponse* response) override;
+  grpc::Status UpdateTransforms(grpc::ServerContext* context, const v1::UpdateTransformsRequest* request,
+                                v1::DynamicVersion* response) override;
+  grpc::Status UpdateVertices(grpc::ServerContext* context, const v1::UpdateVerticesRequest* request,
+                              v1::DynamicVersion* response) override;
+  grpc::Status Remove(grpc::ServerContext* context, const v1::RemoveRequest* request,
+                      v1::DynamicVersion* response) override;
 
   ServiceCounters counters() const;
 
@@ -140,7 +151,11 @@ class SceneQueryService final : public SceneQueryBase {
   // Answers `rays` into `out` (hit records or occlusion bytes) with the
   // request's flags and adds the engine's figures to the counters.
   template <QueryKind kKind>
-  Status trace(std::span<const Ray> rays, uint8_t* out, const v1::QueryRequest& request, QueryStats* stats);
+  Status trace(std::span<const Ray> rays, uint8_t* out, const v1::QueryRequest& request,
+               const std::shared_ptr<const DynamicSnapshot>& dynamic, QueryStats* stats);
+  // The dynamic layer's version a call traces: the one the request names,
+  // or the latest; held for all of the call's parts.
+  Expected<std::shared_ptr<const DynamicSnapshot>> dynamic_for(const v1::QueryRequest& request) const;
   template <QueryKind kKind, class Response>
   grpc::Status answer(grpc::ServerContext* context, const v1::QueryRequest& request, Response* response);
   // answer() for a request with a shared payload (shared_payload.h).

@@ -38,6 +38,8 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
   const uint64_t n = request.batch().ray_count();
   const ReusePool<CallBuffers>::Lease buffers = call_buffers_.take();
   v1::QueryStats* wire_stats = response->mutable_stats();
+  auto dynamic = dynamic_for(request);
+  if (!dynamic.ok()) return to_grpc_status(dynamic.status().with_context("request.dynamic_version"));
   // Groups in order, so under strict mode the first bad ray found is the
   // call's first (earlier groups had none). An empty batch is one empty group.
   const uint64_t groups = std::max<uint64_t>(1, (n + kSharedGroupRays - 1) / kSharedGroupRays);
@@ -55,7 +57,7 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     const uint64_t answer_bytes = count * Traits::kReplyBytesPerRay;
     if (buffers->answers.size() < answer_bytes) buffers->answers.resize(answer_bytes);
     QueryStats stats;
-    const Status status = trace<kKind>(rays, buffers->answers.data(), request, &stats);
+    const Status status = trace<kKind>(rays, buffers->answers.data(), request, *dynamic, &stats);
     if (!status.ok()) return to_grpc_status(status);
     const Status written =
         write_shared_answers(**object, request.shared(), first * Traits::kReplyBytesPerRay,
@@ -64,6 +66,7 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     wire::add_to_wire(stats, wire_stats);
   }
   set_reply_header(response, n, request.sequence());
+  response->set_dynamic_version((*dynamic)->version);
   response->set_answers_in_shared(true);
   return grpc::Status::OK;
 }

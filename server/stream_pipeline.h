@@ -52,6 +52,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/dynamic/dynamic_snapshot.h"
 #include "core/ray/ray_types.h"
 #include "outcore/v1/scene_query.pb.h"
 #include "server/ray_batch.h"
@@ -65,6 +66,7 @@ struct StreamChunk {
   std::vector<Ray> widened;   // F32X6 rays (or misaligned F32X8) widened here
   std::span<const Ray> rays;  // the chunk's rays, in request or in widened
   BatchPosition position;
+  std::shared_ptr<const DynamicSnapshot> dynamic;  // the stream's version of the dynamic layer
 };
 
 // Figures of one stream for the debug log.

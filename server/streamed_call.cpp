@@ -48,7 +48,8 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
   if (group.size() == 1) {
     std::string* payload = Traits::payload(replies.front().get());
     payload->resize(n * Traits::kReplyBytesPerRay);
-    status = trace<kKind>(first.rays, reinterpret_cast<uint8_t*>(payload->data()), first.request, &stats);
+    status = trace<kKind>(first.rays, reinterpret_cast<uint8_t*>(payload->data()), first.request,
+                          first.dynamic, &stats);
   } else {
     // One engine call for the whole group: its rays gathered into one batch,
     // its answers split into the chunks' replies (two copies, far cheaper
@@ -61,7 +62,7 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
       at += chunk->rays.size();
     }
     status = trace<kKind>(buffers->rays, reinterpret_cast<uint8_t*>(buffers->answers.data()), first.request,
-                          &stats);
+                          first.dynamic, &stats);
     if (status.ok()) {
       at = 0;
       for (size_t i = 0; i < group.size(); ++i) {
@@ -76,6 +77,7 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
   for (size_t i = 0; i < group.size(); ++i) {
     Response* reply = replies[i].get();
     set_reply_header(reply, group[i]->rays.size(), group[i]->request.sequence());
+    reply->set_dynamic_version(first.dynamic->version);
     if (i + 1 == group.size()) {
       // The engine call's figures go with the group's last reply; the others
       // count only their own rays (the stream's sums stay exact).
@@ -124,6 +126,7 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
   BatchPosition position;
   position.streamed = true;
   grpc::Status status = grpc::Status::OK;
+  std::shared_ptr<const DynamicSnapshot> stream_dynamic;
   grpc::ByteBuffer bytes;
   for (;;) {
     std::unique_ptr<StreamChunk> chunk = pipeline.spare_chunk();
@@ -147,6 +150,29 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
       break;
     }
     chunk->rays = *rays;
+    // The whole stream sees one version of the dynamic layer: the one its
+    // first chunk names (or the latest then); later chunks may only repeat it.
+    if (stream_dynamic == nullptr) {
+      auto dynamic = dynamic_for(chunk->request);
+      if (!dynamic.ok()) {
+        status = finish(context, Traits::kStream,
+                        to_grpc_status(dynamic.status().with_context(where(position) + ".dynamic_version")),
+                        chunk->request.batch().ray_count(), start);
+        break;
+      }
+      stream_dynamic = *dynamic;
+    } else if (chunk->request.has_dynamic_version() &&
+               chunk->request.dynamic_version() != stream_dynamic->version) {
+      status = finish(
+          context, Traits::kStream,
+          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                       where(position) + " names dynamic version " +
+                           std::to_string(chunk->request.dynamic_version()) + ", the stream traces version " +
+                           std::to_string(stream_dynamic->version) + " (one version a stream)"),
+          chunk->request.batch().ray_count(), start);
+      break;
+    }
+    chunk->dynamic = stream_dynamic;
     position.first_ray += rays->size();
     ++position.chunk;
     if (!pipeline.push(std::move(chunk))) break;

@@ -78,8 +78,8 @@ Status DynamicScene::check_mesh_id(uint32_t mesh_id, const DynamicSnapshot& s, c
   return Status::Ok();
 }
 
-Expected<uint32_t> DynamicScene::add_mesh(std::span<const float> vertices,
-                                          std::span<const uint32_t> triangles) {
+Expected<DynamicAdded> DynamicScene::add_mesh(std::span<const float> vertices,
+                                              std::span<const uint32_t> triangles) {
   std::lock_guard<std::mutex> lock(change_mutex_);
   std::shared_ptr<DynamicSnapshot> next = copy_of_latest();
   const auto mesh_id = static_cast<uint32_t>(next->meshes.size());
@@ -87,11 +87,10 @@ Expected<uint32_t> DynamicScene::add_mesh(std::span<const float> vertices,
       std::shared_ptr<const DynamicMesh> mesh,
       DynamicMesh::create(vertices, triangles, "add_mesh (mesh " + std::to_string(mesh_id) + ")"));
   next->meshes.push_back(std::move(mesh));
-  publish(std::move(next));
-  return mesh_id;
+  return DynamicAdded{mesh_id, publish(std::move(next))};
 }
 
-Expected<uint32_t> DynamicScene::add_instance(uint32_t mesh_id, std::span<const double> transform) {
+Expected<DynamicAdded> DynamicScene::add_instance(uint32_t mesh_id, std::span<const double> transform) {
   std::lock_guard<std::mutex> lock(change_mutex_);
   std::shared_ptr<DynamicSnapshot> next = copy_of_latest();
   OUTCORE_RETURN_IF_ERROR(check_mesh_id(mesh_id, *next, "add_instance"));
@@ -105,8 +104,7 @@ Expected<uint32_t> DynamicScene::add_instance(uint32_t mesh_id, std::span<const 
   build_dynamic_top_level(*next);
   ++counters_.top_rebuilds;
   ++next_geometry_id_;
-  publish(std::move(next));
-  return id;
+  return DynamicAdded{id, publish(std::move(next))};
 }
 
 Expected<uint64_t> DynamicScene::update_transforms(std::span<const uint32_t> geometry_ids,

@@ -35,6 +35,13 @@ namespace outcore {
 // "The latest version" where a version number is asked for.
 inline constexpr uint64_t kLatestDynamicVersion = ~uint64_t{0};
 
+// What an addition made: the new mesh id or geometry id, and the version
+// that holds it.
+struct DynamicAdded {
+  uint32_t id = 0;
+  uint64_t version = 0;
+};
+
 class DynamicScene {
  public:
   static constexpr std::size_t kKeptVersions = 16;
@@ -42,10 +49,10 @@ class DynamicScene {
   explicit DynamicScene(uint32_t first_geometry_id = 0);
 
   // vertices: x, y, z each; triangles: 3 vertex indices each. Returns the mesh id.
-  Expected<uint32_t> add_mesh(std::span<const float> vertices, std::span<const uint32_t> triangles);
+  Expected<DynamicAdded> add_mesh(std::span<const float> vertices, std::span<const uint32_t> triangles);
   // transform: 12 numbers, a row-major 3x4 matrix (AffineTransform). Returns
   // the instance's geometry id.
-  Expected<uint32_t> add_instance(uint32_t mesh_id, std::span<const double> transform);
+  Expected<DynamicAdded> add_instance(uint32_t mesh_id, std::span<const double> transform);
   // 12 numbers per id, in the same order. Returns the new version. Every id
   // must be a live instance, each at most once.
   Expected<uint64_t> update_transforms(std::span<const uint32_t> geometry_ids,

@@ -154,10 +154,11 @@ TEST_F(DynamicSceneTest, InstancesAnswerAsBruteForceOverTheirWorldTriangles) {
   std::vector<uint32_t> ids;
   for (int k = 0; k < 12; ++k) {
     const auto id = scene.add_instance(
-        k % 2 ? *torus : *sphere,
+        k % 2 ? torus->id : sphere->id,
         placement(0.3 * k, 0.5 + 0.1 * k, {3.0 * (k % 4), 3.0 * (k / 4), 0.2 * k}, k == 5 ? 0.4 : 0.0));
     ASSERT_TRUE(id.ok()) << id.status().to_string();
-    ids.push_back(*id);
+    ids.push_back(id->id);
+    EXPECT_EQ(id->version, scene.latest()->version);
   }
   EXPECT_EQ(ids.front(), 100u) << "dynamic ids continue after the static ones";
   EXPECT_EQ(ids.back(), 111u);
@@ -176,10 +177,10 @@ TEST_F(DynamicSceneTest, InstancesAnswerAsBruteForceOverTheirWorldTriangles) {
 
 TEST_F(DynamicSceneTest, RefitsAnswerBitwiseAsFreshBuildsOfTheSameVersion) {
   DynamicScene scene;
-  const uint32_t mesh = *scene.add_mesh(torus_.vertices, torus_.triangles);
+  const uint32_t mesh = scene.add_mesh(torus_.vertices, torus_.triangles)->id;
   std::vector<uint32_t> ids;
   for (int k = 0; k < 40; ++k)
-    ids.push_back(*scene.add_instance(mesh, placement(0.1 * k, 1, {5.0 * (k % 8), 5.0 * (k / 8), 0})));
+    ids.push_back(scene.add_instance(mesh, placement(0.1 * k, 1, {5.0 * (k % 8), 5.0 * (k / 8), 0}))->id);
   std::vector<float> moving = torus_.vertices;
   for (int frame = 1; frame <= 30; ++frame) {
     // A smooth wave through the mesh, and every instance drifting and turning.
@@ -212,7 +213,7 @@ TEST_F(DynamicSceneTest, RefitsAnswerBitwiseAsFreshBuildsOfTheSameVersion) {
 
 TEST_F(DynamicSceneTest, AScramblingMotionTriggersARebuild) {
   DynamicScene scene;
-  const uint32_t mesh = *scene.add_mesh(sphere_.vertices, sphere_.triangles);
+  const uint32_t mesh = scene.add_mesh(sphere_.vertices, sphere_.triangles)->id;
   ASSERT_TRUE(scene.add_instance(mesh, placement(0, 1, {0, 0, 0})).ok());
   std::vector<float> scrambled = sphere_.vertices;
   std::mt19937 rng(7);
@@ -234,11 +235,11 @@ TEST_F(DynamicSceneTest, AScramblingMotionTriggersARebuild) {
 
 TEST_F(DynamicSceneTest, ClosedMeshesMovedAndDeformedDoNotLeakAtVerticesAndEdges) {
   DynamicScene scene;
-  const uint32_t mesh = *scene.add_mesh(sphere_.vertices, sphere_.triangles);
+  const uint32_t mesh = scene.add_mesh(sphere_.vertices, sphere_.triangles)->id;
   const std::vector<Vec3d> centres = {{0, 0, 0}, {1e3, -2e3, 5e2}, {-7.5, 3.25, 1e4}};
   std::vector<uint32_t> ids;
   for (std::size_t k = 0; k < centres.size(); ++k)
-    ids.push_back(*scene.add_instance(mesh, placement(0.7 * k, 1.5, centres[k], 0.2)));
+    ids.push_back(scene.add_instance(mesh, placement(0.7 * k, 1.5, centres[k], 0.2))->id);
   std::vector<float> squashed = sphere_.vertices;
   for (std::size_t v = 0; v < squashed.size(); v += 3) squashed[v] *= 1.7f;
   ASSERT_TRUE(scene.update_vertices(mesh, squashed).ok());
@@ -270,8 +271,8 @@ TEST_F(DynamicSceneTest, ClosedMeshesMovedAndDeformedDoNotLeakAtVerticesAndEdges
 
 TEST_F(DynamicSceneTest, AQueryHoldsItsVersionWhileUpdatesPublishNewOnes) {
   DynamicScene scene;
-  const uint32_t mesh = *scene.add_mesh(sphere_.vertices, sphere_.triangles);
-  const uint32_t id = *scene.add_instance(mesh, placement(0, 1, {0, 0, 0}));
+  const uint32_t mesh = scene.add_mesh(sphere_.vertices, sphere_.triangles)->id;
+  const uint32_t id = scene.add_instance(mesh, placement(0, 1, {0, 0, 0}))->id;
   const auto before = scene.latest();
   const std::vector<Ray> rays = rays_through(before->instances[0].world_box, 500, 5);
   const std::vector<Hit> hits_before = trace(*before, rays);
@@ -300,8 +301,8 @@ TEST_F(DynamicSceneTest, AQueryHoldsItsVersionWhileUpdatesPublishNewOnes) {
 
 TEST_F(DynamicSceneTest, BadInputIsANamedErrorThatChangesNothing) {
   DynamicScene scene(7);
-  const uint32_t mesh = *scene.add_mesh(sphere_.vertices, sphere_.triangles);
-  const uint32_t id = *scene.add_instance(mesh, placement(0, 1, {0, 0, 0}));
+  const uint32_t mesh = scene.add_mesh(sphere_.vertices, sphere_.triangles)->id;
+  const uint32_t id = scene.add_instance(mesh, placement(0, 1, {0, 0, 0}))->id;
   const auto before = scene.latest();
   const auto expect_error = [&](const Status& status, const std::string& words) {
     EXPECT_FALSE(status.ok()) << words;
@@ -342,10 +343,10 @@ TEST_F(DynamicSceneTest, BadInputIsANamedErrorThatChangesNothing) {
 
 TEST_F(DynamicSceneTest, QueriesDuringAStreamOfUpdatesEachMatchOneVersion) {
   DynamicScene scene;
-  const uint32_t mesh = *scene.add_mesh(torus_.vertices, torus_.triangles);
+  const uint32_t mesh = scene.add_mesh(torus_.vertices, torus_.triangles)->id;
   std::vector<uint32_t> ids;
   for (int k = 0; k < 16; ++k)
-    ids.push_back(*scene.add_instance(mesh, placement(0, 1, {4.0 * (k % 4), 4.0 * (k / 4), 0})));
+    ids.push_back(scene.add_instance(mesh, placement(0, 1, {4.0 * (k % 4), 4.0 * (k / 4), 0}))->id);
   const std::vector<Ray> rays = rays_through(scene.latest()->top.empty() ? Aabb{} : [&] {
     Aabb b;
     for (const auto& i : scene.latest()->instances) b.extend(i.world_box);

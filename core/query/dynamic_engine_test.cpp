@@ -70,11 +70,11 @@ TEST_F(DynamicEngine, BatchesAnswerAsBruteForceOverStaticAndDynamicTogether) {
   const Aabb b = bunny_->bounds;
   const Vec3f e = b.extent();
   // One box through the bunny, one beside it.
-  const auto inside = dynamic.add_instance(*box, scaled_at(0.4 * e.x, Vec3d(b.center()) - Vec3d(e) * 0.2));
-  const auto beside = dynamic.add_instance(*box, scaled_at(0.3 * e.x, Vec3d(b.hi) + Vec3d(0, -0.5 * e.y, 0)));
+  const auto inside = dynamic.add_instance(box->id, scaled_at(0.4 * e.x, Vec3d(b.center()) - Vec3d(e) * 0.2));
+  const auto beside = dynamic.add_instance(box->id, scaled_at(0.3 * e.x, Vec3d(b.hi) + Vec3d(0, -0.5 * e.y, 0)));
   ASSERT_TRUE(inside.ok() && beside.ok());
-  EXPECT_EQ(*inside, 1u) << "dynamic ids continue after the store's one input";
-  EXPECT_EQ(*beside, 2u);
+  EXPECT_EQ(inside->id, 1u) << "dynamic ids continue after the store's one input";
+  EXPECT_EQ(beside->id, 2u);
 
   Aabb all = b;
   for (const auto& i : dynamic.latest()->instances) all.extend(i.world_box);
@@ -123,9 +123,9 @@ TEST_F(DynamicEngine, ABatchNamingAnOldVersionIsAnsweredAsItWas) {
   auto engine = QueryEngine::open(bunny_->path, options);
   ASSERT_TRUE(engine.ok());
   DynamicScene& dynamic = (*engine)->dynamic();
-  const uint32_t box = *dynamic.add_mesh(kBoxVertices, kBoxTriangles);
+  const uint32_t box = dynamic.add_mesh(kBoxVertices, kBoxTriangles)->id;
   const Aabb b = bunny_->bounds;
-  const uint32_t id = *dynamic.add_instance(box, scaled_at(0.5 * b.extent().x, Vec3d(b.lo)));
+  const uint32_t id = dynamic.add_instance(box, scaled_at(0.5 * b.extent().x, Vec3d(b.lo)))->id;
   const uint64_t then = dynamic.latest()->version;
   const std::vector<Ray> rays = testing::make_test_rays(b, 2000, 12);
   std::vector<Hit> before(rays.size()), after(rays.size()), named(rays.size());

@@ -145,10 +145,12 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   BatchTally tally;
   tally.stats.rays = n;
 
-  OUTCORE_ASSIGN_OR_RETURN(const std::shared_ptr<const DynamicSnapshot> dynamic,
-                           options.dynamic_version == kLatestDynamicVersion
-                               ? dynamic_.latest()
-                               : dynamic_.at(options.dynamic_version));
+  std::shared_ptr<const DynamicSnapshot> dynamic = options.dynamic_snapshot;
+  if (dynamic == nullptr) {
+    OUTCORE_ASSIGN_OR_RETURN(dynamic, options.dynamic_version == kLatestDynamicVersion
+                                          ? dynamic_.latest()
+                                          : dynamic_.at(options.dynamic_version));
+  }
   const ReusePool<BatchScratch>::Lease scratch = scratch_pool_.take();
   const BatchPlan plan =
       plan_batch(options, {.rays = n,

@@ -123,6 +123,10 @@ struct QueryOptions {
   // The dynamic layer's version the batch sees (DynamicScene::at); the
   // latest when the batch starts by default.
   uint64_t dynamic_version = kLatestDynamicVersion;
+  // A version already taken (a call traced in parts keeps one version for
+  // all of them, however many changes are made meanwhile); wins over
+  // dynamic_version when set.
+  std::shared_ptr<const DynamicSnapshot> dynamic_snapshot;
 };
 
 class QueryEngine {

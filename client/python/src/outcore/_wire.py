@@ -43,6 +43,7 @@ _TAG_REQUEST_STRICT = bytes([2 << 3 | _VARINT])
 _TAG_REQUEST_NO_REORDER = bytes([3 << 3 | _VARINT])
 _TAG_REQUEST_SEQUENCE = bytes([4 << 3 | _VARINT])
 _TAG_REQUEST_SHARED = bytes([5 << 3 | _LEN])
+_TAG_REQUEST_DYNAMIC_VERSION = bytes([6 << 3 | _VARINT])
 _TAG_BATCH_VERSION = bytes([1 << 3 | _VARINT])
 _TAG_BATCH_LAYOUT = bytes([2 << 3 | _VARINT])
 _TAG_BATCH_COUNT = bytes([3 << 3 | _VARINT])
@@ -54,6 +55,7 @@ _TAG_SHARED_TOKEN = bytes([4 << 3 | _LEN])
 # Reply fields (same numbers in IntersectResponse and OccludedResponse).
 _REPLY_VERSION, _REPLY_COUNT, _REPLY_PAYLOAD, _REPLY_SEQUENCE, _REPLY_STATS = 1, 2, 3, 4, 5
 _REPLY_ANSWERS_IN_SHARED = 6
+_REPLY_DYNAMIC_VERSION = 7
 
 
 class SharedRef(NamedTuple):
@@ -102,6 +104,7 @@ def encode_query(
     no_reorder: bool = False,
     sequence: int = 0,
     shared: SharedRef | None = None,
+    dynamic_version: int | None = None,
 ) -> bytes:
     """Serialises a QueryRequest for C-contiguous (n, 6|8) '<f4' rays. With
     `shared` the rays are not copied in (batch.rays is omitted: they are in
@@ -129,6 +132,8 @@ def encode_query(
         parts += [_TAG_REQUEST_SEQUENCE, varint(sequence)]
     if shared is not None:
         parts.append(_encode_shared(shared))
+    if dynamic_version is not None:
+        parts += [_TAG_REQUEST_DYNAMIC_VERSION, varint(dynamic_version)]
     return b"".join(parts)
 
 
@@ -136,7 +141,7 @@ class Reply:
     """A parsed IntersectResponse/OccludedResponse; the payload stays in `data`."""
 
     __slots__ = ("data", "layout_version", "ray_count", "payload_offset", "payload_size", "sequence", "stats",
-                 "answers_in_shared")
+                 "answers_in_shared", "dynamic_version")
 
     def __init__(self, data: bytes):
         self.data = data
@@ -147,6 +152,7 @@ class Reply:
         self.sequence = 0
         self.stats = b""  # serialised QueryStats
         self.answers_in_shared = False  # the answers are in the request's shared object
+        self.dynamic_version = 0  # the dynamic layer's version the answers saw
 
     def payload(self, dtype: np.dtype) -> np.ndarray:
         """The hits/occluded bytes as a read-only view of `data` (no copy)."""
@@ -191,6 +197,8 @@ def decode_reply(data: bytes) -> Reply:
                 reply.sequence = value
             elif field == _REPLY_ANSWERS_IN_SHARED:
                 reply.answers_in_shared = value != 0
+            elif field == _REPLY_DYNAMIC_VERSION:
+                reply.dynamic_version = value
         elif wire_type == _LEN:
             size, pos = _read_varint(data, pos)
             if pos + size > end:

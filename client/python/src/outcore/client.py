@@ -44,6 +44,7 @@ and then belong to whichever call finished last.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import grpc
 import numpy as np
@@ -75,6 +76,48 @@ _SHARED_MIN_RAYS = 16_384
 # The server's trailing metadata on a refusal (proto/outcore/v1/shared_payload_wire.h).
 _SHARED_REFUSED = ("outcore-shared-payload", "refused")
 _SERVICE = pb.DESCRIPTOR.services_by_name["SceneQuery"].full_name
+
+
+def _vertex_array(values, name: str) -> np.ndarray:
+    a = np.asarray(values)
+    if a.ndim != 2 or a.shape[1] != 3 or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+        raise ValueError(f"{name} must be an (N, 3) array of numbers, got shape {a.shape} dtype {a.dtype}")
+    return np.ascontiguousarray(a, dtype="<f4")
+
+
+def _index_array(values, name: str) -> np.ndarray:
+    a = np.asarray(values)
+    if a.ndim != 2 or a.shape[1] != 3 or not np.issubdtype(a.dtype, np.integer):
+        raise ValueError(f"{name} must be an (M, 3) array of integers, got shape {a.shape} dtype {a.dtype}")
+    if a.size and (a.min() < 0 or a.max() > 0xFFFFFFFF):
+        raise ValueError(f"{name} holds an index outside 0..4294967295")
+    return np.ascontiguousarray(a, dtype="<u4")
+
+
+def _transforms(values, count: int, name: str) -> np.ndarray:
+    a = np.asarray(values, dtype=np.float64)
+    if a.size != 12 * count:
+        raise ValueError(f"{name} must hold 12 numbers ((3, 4)) per instance: {count} instances, got {a.size}")
+    return a.reshape(-1)
+
+
+def _uint32(value, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not 0 <= value <= 0xFFFFFFFF:
+        raise ValueError(f"{name} must be an int in 0..4294967295, got {value!r}")
+    return int(value)
+
+
+class _QueryOptions(NamedTuple):
+    strict: bool
+    dynamic_version: int | None
+
+
+def _check_version(version) -> int | None:
+    if version is None:
+        return None
+    if isinstance(version, bool) or not isinstance(version, (int, np.integer)) or not 0 <= version < 2**64:
+        raise ValueError(f"dynamic_version must be None or a non-negative int, got {version!r}")
+    return int(version)
 
 
 def _refused(error: grpc.RpcError) -> bool:
@@ -195,6 +238,22 @@ class SceneClient:
         #: seconds_total, seconds_upper, seconds_brick, ...; summed over the
         #: chunks of a streamed batch), or None before the first.
         self.last_stats: dict | None = None
+        #: The dynamic layer's version the last query saw (0: the empty layer).
+        self.last_dynamic_version = 0
+        self._dynamic_calls = {
+            name: self._channel.unary_unary(
+                f"/{_SERVICE}/{name}",
+                request_serializer=request.SerializeToString,
+                response_deserializer=response.FromString,
+            )
+            for name, request, response in (
+                ("AddMesh", pb.AddMeshRequest, pb.AddMeshResponse),
+                ("AddInstance", pb.AddInstanceRequest, pb.AddInstanceResponse),
+                ("UpdateTransforms", pb.UpdateTransformsRequest, pb.DynamicVersion),
+                ("UpdateVertices", pb.UpdateVerticesRequest, pb.DynamicVersion),
+                ("Remove", pb.RemoveRequest, pb.DynamicVersion),
+            )
+        }
 
     # -- lifetime ---------------------------------------------------------
 
@@ -231,7 +290,7 @@ class SceneClient:
 
     # -- queries ----------------------------------------------------------
 
-    def cast_rays(self, rays, strict: bool = False) -> dict:
+    def cast_rays(self, rays, strict: bool = False, dynamic_version: int | None = None) -> dict:
         """Closest hit of each ray, as Open3D's RaycastingScene.cast_rays.
 
         rays: (..., 6) [ox oy oz dx dy dz] or (..., 8) [... tnear tfar]
@@ -245,10 +304,13 @@ class SceneClient:
         fresh copy out of the segment, never the segment itself): use
         np.array(x) for a writable copy. strict: invalid rays (NaN/Inf, zero
         direction, bad tnear/tfar) raise OutcoreError INVALID_ARGUMENT naming
-        the first bad ray, instead of being misses.
+        the first bad ray, instead of being misses. dynamic_version: the
+        dynamic layer's version to trace (see add_mesh), the latest if None;
+        one no longer kept is OutcoreError NOT_FOUND. The version the answers
+        saw is then in last_dynamic_version.
         """
         flat, batch_shape = as_wire_rays(rays)
-        hits = self._query(_INTERSECT, flat, strict)
+        hits = self._query(_INTERSECT, flat, _QueryOptions(strict, _check_version(dynamic_version)))
         return {
             "t_hit": hits["t_hit"].reshape(batch_shape),
             "geometry_ids": hits["geometry_id"].reshape(batch_shape),
@@ -257,11 +319,11 @@ class SceneClient:
             "primitive_normals": hits["ng"].reshape(batch_shape + (3,)),
         }
 
-    def test_occlusions(self, rays, strict: bool = False) -> np.ndarray:
+    def test_occlusions(self, rays, strict: bool = False, dynamic_version: int | None = None) -> np.ndarray:
         """Whether each ray hits anything in [tnear, tfar]: a read-only bool
         array shaped like the batch dims. Arguments as cast_rays."""
         flat, batch_shape = as_wire_rays(rays)
-        occluded = self._query(_OCCLUDED, flat, strict)
+        occluded = self._query(_OCCLUDED, flat, _QueryOptions(strict, _check_version(dynamic_version)))
         if occluded.size and occluded.max() > 1:
             raise OutcoreError("DATA_LOSS", "occlusion reply holds a byte that is neither 0 nor 1",
                                _OCCLUDED.unary)
@@ -296,6 +358,62 @@ class SceneClient:
         subtree_files_evicted, subtree_write_seconds; all 0 without a tier)."""
         return _message_to_dict(self._call_plain(self._get_stats, pb.GetStatsRequest(), "GetStats"))
 
+    # -- dynamic geometry -------------------------------------------------
+
+    def add_mesh(self, vertices, triangles) -> int:
+        """Adds a mesh to the server's dynamic layer: vertices (N, 3) real,
+        triangles (M, 3) vertex indices. Returns its mesh id (0, 1, ... in
+        order of addition); it is traced only once placed by add_instance.
+        Every change makes a new version (last_dynamic_version); a bad mesh
+        (non-finite vertex, index out of range) is OutcoreError
+        INVALID_ARGUMENT naming it, and changes nothing."""
+        v = _vertex_array(vertices, "vertices")
+        t = _index_array(triangles, "triangles")
+        reply = self._call_plain(self._dynamic_calls["AddMesh"], pb.AddMeshRequest(
+            vertex_count=v.shape[0], vertices=v.tobytes(), triangle_count=t.shape[0], triangles=t.tobytes()),
+            "AddMesh")
+        self.last_dynamic_version = reply.version
+        return reply.mesh_id
+
+    def add_instance(self, mesh_id: int, transform=None) -> int:
+        """Places mesh `mesh_id` in the scene: transform (3, 4) (or 12 numbers,
+        row-major; world = T[:, :3] @ object + T[:, 3]), identity if None.
+        Returns the instance's geometry id (hits report it; ids continue after
+        the packed inputs' and are never reused)."""
+        rows = _transforms(np.eye(3, 4) if transform is None else transform, 1, "transform")
+        reply = self._call_plain(self._dynamic_calls["AddInstance"], pb.AddInstanceRequest(
+            mesh_id=_uint32(mesh_id, "mesh_id"), transform=rows.tolist()), "AddInstance")
+        self.last_dynamic_version = reply.version
+        return reply.geometry_id
+
+    def update_transforms(self, geometry_ids, transforms) -> int:
+        """New transforms ((K, 3, 4) or (K, 12)) for K instances, all at once
+        (all or nothing). Returns the new version."""
+        ids = np.asarray(geometry_ids).reshape(-1)
+        rows = _transforms(transforms, ids.shape[0], "transforms")
+        reply = self._call_plain(self._dynamic_calls["UpdateTransforms"], pb.UpdateTransformsRequest(
+            geometry_ids=[_uint32(i, "geometry_ids") for i in ids.tolist()], transforms=rows.tolist()),
+            "UpdateTransforms")
+        self.last_dynamic_version = reply.version
+        return reply.version
+
+    def update_vertices(self, mesh_id: int, vertices) -> int:
+        """New positions for every vertex of a mesh ((N, 3), the same N: its
+        topology is fixed); its instances move with it. Returns the new version."""
+        v = _vertex_array(vertices, "vertices")
+        reply = self._call_plain(self._dynamic_calls["UpdateVertices"], pb.UpdateVerticesRequest(
+            mesh_id=_uint32(mesh_id, "mesh_id"), vertex_count=v.shape[0], vertices=v.tobytes()),
+            "UpdateVertices")
+        self.last_dynamic_version = reply.version
+        return reply.version
+
+    def remove(self, geometry_id: int) -> int:
+        """Removes an instance (its mesh stays). Returns the new version."""
+        reply = self._call_plain(self._dynamic_calls["Remove"],
+                                 pb.RemoveRequest(geometry_id=_uint32(geometry_id, "geometry_id")), "Remove")
+        self.last_dynamic_version = reply.version
+        return reply.version
+
     # -- internals --------------------------------------------------------
 
     def _call_plain(self, call, request, method: str):
@@ -320,7 +438,7 @@ class SceneClient:
             chunk = min(chunk, _STREAM_CHUNK_RAYS)
         return chunk
 
-    def _query(self, query: _Query, rays: np.ndarray, strict: bool) -> np.ndarray:
+    def _query(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
         """Answers (n, 6|8) wire rays: an (n,) array of query.record_dtype."""
         n = rays.shape[0]
         if n == 0:
@@ -330,15 +448,15 @@ class SceneClient:
             self._last_call_shared = False
             return out
         if self._shared_wanted(n):
-            out = self._query_shared(query, rays, strict)
+            out = self._query_shared(query, rays, opts)
             if out is not None:
                 return out
             # The server refused the segment or none could be made: shared
             # memory is now off for this client, and the batch goes as bytes.
         chunk = self._chunk_size(query, n, rays.shape[1] * 4)
         if n <= chunk:
-            return self._query_unary(query, rays, strict)
-        return self._query_stream(query, rays, strict, chunk)
+            return self._query_unary(query, rays, opts)
+        return self._query_stream(query, rays, opts, chunk)
 
     def _check_reply(self, query: _Query, reply: _wire.Reply, expected_rays: int, method: str,
                      sequence: int | None = None, shared: bool = False) -> None:
@@ -369,14 +487,15 @@ class SceneClient:
         self._check_reply(query, reply, expected_rays, query.unary, shared=shared)
         return reply
 
-    def _query_unary(self, query: _Query, rays: np.ndarray, strict: bool) -> np.ndarray:
-        request = _wire.encode_query(rays, strict=strict)
+    def _query_unary(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
+        request = _wire.encode_query(rays, strict=opts.strict, dynamic_version=opts.dynamic_version)
         try:
             data = self._calls[query.unary](request, timeout=self.timeout)
         except grpc.RpcError as e:
             raise from_rpc_error(e, query.unary) from None
         reply = self._unary_reply(query, data, rays.shape[0])
         self.last_stats = _message_to_dict(pb.QueryStats.FromString(reply.stats))
+        self.last_dynamic_version = reply.dynamic_version
         self._last_call_shared = False
         return reply.payload(query.record_dtype)
 
@@ -392,7 +511,7 @@ class SceneClient:
         self._shared_disabled_reason = reason
         self._shared_pool.close()  # frees /dev/shm now; in-use segments go when given back
 
-    def _query_shared(self, query: _Query, rays: np.ndarray, strict: bool) -> np.ndarray | None:
+    def _query_shared(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray | None:
         """One unary call with the rays and answers in a shared segment. None
         when the batch must go as bytes: the server refused the segment
         (shared memory is then off for this client) or no segment of its
@@ -416,7 +535,7 @@ class SceneClient:
         try:
             segment.write_rays(rays, rays_offset)
             request = _wire.encode_query(
-                rays, strict=strict,
+                rays, strict=opts.strict, dynamic_version=opts.dynamic_version,
                 shared=_wire.SharedRef(segment.name, rays_offset, answers_offset, segment.token))
             try:
                 data = self._calls[query.unary](request, timeout=self.timeout)
@@ -432,16 +551,18 @@ class SceneClient:
         finally:
             self._shared_pool.give(segment, reusable)
         self.last_stats = _message_to_dict(pb.QueryStats.FromString(reply.stats))
+        self.last_dynamic_version = reply.dynamic_version
         self._last_call_shared = True
         return out
 
-    def _query_stream(self, query: _Query, rays: np.ndarray, strict: bool, chunk: int) -> np.ndarray:
+    def _query_stream(self, query: _Query, rays: np.ndarray, opts: _QueryOptions, chunk: int) -> np.ndarray:
         n = rays.shape[0]
         starts = range(0, n, chunk)
         # Chunks are serialised lazily as gRPC asks for them, so at most a
         # few are held at once, not a second copy of the batch.
         requests = (
-            _wire.encode_query(rays[start : start + chunk], strict=strict, sequence=sequence)
+            _wire.encode_query(rays[start : start + chunk], strict=opts.strict, sequence=sequence,
+                               dynamic_version=opts.dynamic_version)
             for sequence, start in enumerate(starts)
         )
         out = np.empty(n, dtype=query.record_dtype)
@@ -465,6 +586,7 @@ class SceneClient:
                 self._check_reply(query, reply, count, query.stream, sequence)
                 out_bytes[start * itemsize : (start + count) * itemsize] = reply.payload(np.uint8)
                 stats.append(reply.stats)
+                self.last_dynamic_version = reply.dynamic_version
                 sequence += 1
         except grpc.RpcError as e:
             raise from_rpc_error(e, query.stream) from None
