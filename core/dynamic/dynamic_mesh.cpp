@@ -1,6 +1,11 @@
 #include "core/dynamic/dynamic_mesh.h"
 
+#include <sys/mman.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <cmath>
+#include <cstring>
 
 #include "core/accel/bvh/binned_sah_builder.h"
 #include "core/accel/bvh/wide_bvh_collapse.h"
@@ -32,17 +37,50 @@ Triangle triangle_of(const MeshTopology& topology, std::span<const Vec3f> vertic
 }
 
 // Writes each used slot's triangle from the vertices (its primitive id is
-// the mesh triangle).
-void write_packets(WideBvh& tree, const MeshTopology& topology, std::span<const Vec3f> vertices) {
-  for (TrianglePacket& packet : tree.packets) {
-    for (uint32_t lane = 0; lane < kPacketLanes; ++lane) {
-      if (packet.primitive_id[lane] == kInvalidId) continue;
-      const Triangle tri = triangle_of(topology, vertices, packet.primitive_id[lane]);
-      const Vec3f corners[3] = {tri.v0, tri.v1, tri.v2};
-      for (int v = 0; v < 3; ++v)
-        for (int axis = 0; axis < 3; ++axis) packet.coord[3 * v + axis][lane] = corners[v][axis];
-    }
+// the mesh triangle); unused slots keep zero vertices, as built.
+void write_packet(TrianglePacket& packet, const MeshTopology& topology, std::span<const Vec3f> vertices) {
+  for (uint32_t lane = 0; lane < kPacketLanes; ++lane) {
+    if (packet.primitive_id[lane] == kInvalidId) continue;
+    const Triangle tri = triangle_of(topology, vertices, packet.primitive_id[lane]);
+    const Vec3f corners[3] = {tri.v0, tri.v1, tri.v2};
+    for (int v = 0; v < 3; ++v)
+      for (int axis = 0; axis < 3; ++axis) packet.coord[3 * v + axis][lane] = corners[v][axis];
   }
+}
+
+// A fresh array of a large tree is most of a refit's time in page faults
+// (one a 4 KiB page); asking for transparent huge pages before it is first
+// touched makes them one a 2 MiB page where the kernel allows it (a hint:
+// nothing changes where it does not).
+template <typename T>
+void resize_on_huge_pages(std::vector<T>& v, std::size_t n) {
+  v.reserve(n);
+  constexpr uintptr_t kHuge = uintptr_t{2} << 20;
+  const auto begin = reinterpret_cast<uintptr_t>(v.data());
+  const uintptr_t first = (begin + kHuge - 1) & ~(kHuge - 1), last = (begin + n * sizeof(T)) & ~(kHuge - 1);
+  if (last > first) madvise(reinterpret_cast<void*>(first), last - first, MADV_HUGEPAGE);
+  v.resize(n);
+}
+
+// `from`'s tree with its packets' triangles taken from the vertices: the
+// nodes copied, each packet's ids copied and its coordinates written, in
+// parallel (one pass over the new packets).
+WideBvh moved_tree(const WideBvh& from, const MeshTopology& topology, std::span<const Vec3f> vertices) {
+  WideBvh tree;
+  resize_on_huge_pages(tree.nodes, from.nodes.size());
+  resize_on_huge_pages(tree.packets, from.packets.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, from.nodes.size(), 4096), [&](const auto& range) {
+    std::memcpy(&tree.nodes[range.begin()], &from.nodes[range.begin()], range.size() * sizeof(WideBvhNode));
+  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, from.packets.size(), 1024), [&](const auto& range) {
+    for (std::size_t p = range.begin(); p != range.end(); ++p) {
+      TrianglePacket& packet = tree.packets[p];
+      std::memcpy(packet.geometry_id, from.packets[p].geometry_id, sizeof(packet.geometry_id));
+      std::memcpy(packet.primitive_id, from.packets[p].primitive_id, sizeof(packet.primitive_id));
+      write_packet(packet, topology, vertices);
+    }
+  });
+  return tree;
 }
 
 Aabb bounds_of(std::span<const Vec3f> vertices) {
@@ -106,8 +144,7 @@ Expected<std::shared_ptr<const DynamicMesh>> DynamicMesh::moved(std::span<const 
     return invalid_argument(what + ": " + std::to_string(points.size()) + " vertices given, the mesh has " +
                             std::to_string(topology_->vertex_count) + " (its topology is fixed)");
   std::shared_ptr<DynamicMesh> mesh(new DynamicMesh());
-  mesh->tree_ = WideBvh::copy_of(tree_.view());
-  write_packets(mesh->tree_, *topology_, points);
+  mesh->tree_ = moved_tree(tree_, *topology_, points);
   refit_wide_bvh(mesh->tree_);
   mesh->sah_cost_ = wide_bvh_sah_cost(mesh->tree_.nodes);
   if (mesh->sah_cost_ > kRebuildRatio * built_sah_cost_) return build(topology_, std::move(points));

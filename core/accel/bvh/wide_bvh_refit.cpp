@@ -1,5 +1,8 @@
 #include "core/accel/bvh/wide_bvh_refit.h"
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <cassert>
 
 namespace outcore {
@@ -20,17 +23,24 @@ Aabb leaf_bounds(std::span<const TrianglePacket> packets, uint32_t first_slot, u
   return box;
 }
 
-// Bottom-up over `nodes`, a leaf child's box given by `leaf_box(node, k)`.
+// Leaf children first, all nodes at once (they read only the leaves' own
+// triangles); then inner children bottom-up, which need their child's boxes
+// and cost a union of eight boxes each.
 template <typename LeafBox>
 void refit_nodes(std::span<WideBvhNode> nodes, const LeafBox& leaf_box) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, nodes.size(), 256), [&](const auto& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      WideBvhNode& node = nodes[i];
+      for (uint32_t k = 0; k < kWideBvhWidth; ++k)
+        if ((node.leaf_mask >> k) & 1u) node.set_box(k, leaf_box(node, k));
+    }
+  });
   for (std::size_t i = nodes.size(); i-- > 0;) {
     WideBvhNode& node = nodes[i];
     for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
       if ((node.inner_mask >> k) & 1u) {
         assert(node.child[k] > i && node.child[k] < nodes.size());
         node.set_box(k, node_bounds(nodes[node.child[k]]));
-      } else if ((node.leaf_mask >> k) & 1u) {
-        node.set_box(k, leaf_box(node, k));
       }
     }
   }
