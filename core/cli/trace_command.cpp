@@ -11,6 +11,7 @@
 
 #include "core/cli/commands.h"
 #include "core/cli/engine_options_cli.h"
+#include "core/dynamic/dynamic_scene_file.h"
 #include "core/io/npy.h"
 #include "core/query/query_engine.h"
 #include "core/ray/spawn_origin.h"
@@ -43,6 +44,14 @@ struct TraceArgs {
   std::string trace_out;
   std::string spawn_out;
   std::string spawn_side = "front";
+  std::string dynamic_path;
+};
+
+// The dynamic layer from --dynamic: the file, and its instances' geometry ids.
+struct DynamicFrames {
+  DynamicSceneFile file;
+  std::vector<uint32_t> ids;
+  std::string path;
 };
 
 // The engine's options from the command line, the access trace included.
@@ -94,12 +103,19 @@ struct TraceAnswers {
 
 // Repeats run the same batch again on the now warm cache (the first run is
 // the cold one: time to first hit); the answers are the last run's.
+// With --dynamic, batch r sees frame r % F of the file's transforms.
 Status run_batches(const TraceArgs& args, QueryEngine& engine, std::span<const Ray> rays,
-                   TraceAnswers& answers, std::vector<QueryStats>& runs) {
+                   const DynamicFrames* dynamic, TraceAnswers& answers, std::vector<QueryStats>& runs) {
   const QueryOptions query_options = query_options_of(args);
   answers.occluded.resize(args.any_hit ? rays.size() : 0);
   answers.hits.resize(args.any_hit ? 0 : rays.size());
   for (int r = 0; r < args.repeat; ++r) {
+    if (dynamic != nullptr && r > 0 && dynamic->file.frames > 1) {
+      const uint32_t frame = static_cast<uint32_t>(r) % dynamic->file.frames;
+      const auto moved =
+          engine.dynamic().update_transforms(dynamic->ids, dynamic->file.frame_transforms(frame));
+      if (!moved.ok()) return moved.status().with_context(dynamic->path + ", frame " + std::to_string(frame));
+    }
     QueryStats stats;
     OUTCORE_RETURN_IF_ERROR(args.any_hit ? engine.occluded(rays, answers.occluded, query_options, &stats)
                                          : engine.intersect(rays, answers.hits, query_options, &stats));
@@ -155,9 +171,21 @@ int run_trace(const TraceArgs& args) {
   if (!rays.ok()) return report_command_error("trace", rays.status().message());
   if (args.print_stats) print_engine(**engine, engine_options);
 
+  std::unique_ptr<DynamicFrames> dynamic;
+  if (!args.dynamic_path.empty()) {
+    dynamic = std::make_unique<DynamicFrames>();
+    dynamic->path = args.dynamic_path;
+    auto file = read_dynamic_scene_file(args.dynamic_path);
+    if (!file.ok()) return report_command_error("trace", file.status().message());
+    dynamic->file = std::move(file).value();
+    auto ids = add_dynamic_scene(dynamic->file, args.dynamic_path, (*engine)->dynamic());
+    if (!ids.ok()) return report_command_error("trace", ids.status().message());
+    dynamic->ids = std::move(ids).value();
+  }
+
   TraceAnswers answers;
   std::vector<QueryStats> runs;
-  const Status traced = run_batches(args, **engine, *rays, answers, runs);
+  const Status traced = run_batches(args, **engine, *rays, dynamic.get(), answers, runs);
   if (!traced.ok()) return report_command_error("trace", traced.message());
   if (engine_options.access_trace) {
     engine->reset();  // hands the cache's last buffered records to the writer
@@ -181,9 +209,9 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--any-hit", args->any_hit, "Occlusion query: write whether each ray hits anything");
   add_cache_options(*cmd, args->engine);
   cmd->add_option("--accel-opt", args->engine.accel_options, "Brick structure option key=value (repeatable)");
-  cmd->add_option(
-      "--triangle-test", args->engine.triangle_test,
-      "Triangle test of --brick-accel bvh, kdtree, bsp, grid, hgrid, octree, quadtree or auto: mt, watertight (default) or double");
+  cmd->add_option("--triangle-test", args->engine.triangle_test,
+                  "Triangle test of --brick-accel bvh, kdtree, bsp, grid, hgrid, octree, quadtree or auto: "
+                  "mt, watertight (default) or double");
   cmd->add_flag("--reference", args->engine.reference,
                 "Ground truth: float64 brute force per brick (watertight, slow) on the same store");
   cmd->add_flag("--no-reorder", args->no_reorder, "Trace rays one by one in input order (for comparison)");
@@ -210,6 +238,11 @@ void add_trace_command(CLI::App& app, int& exit_code) {
       ->check(CLI::Range(0, kMaxThreadsOption));
   cmd->add_flag("--stats", args->print_stats, "Print query statistics");
   cmd->add_option("--stats-json", args->stats_json_path, "Write query statistics as JSON to this file");
+  cmd->add_option("--dynamic", args->dynamic_path,
+                  "Dynamic geometry beside the store: meshes and per-frame instance transforms in a .npz "
+                  "(meshN_vertices, meshN_triangles, instance_mesh, transforms (K,3,4) or (F,K,3,4); "
+                  "batch r sees frame r % F)")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--repeat", args->repeat, "Run the batch this many times (first cold, then warm)")
       ->check(CLI::Range(1, 1000000))
       ->capture_default_str();

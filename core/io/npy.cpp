@@ -207,6 +207,54 @@ Expected<std::vector<Ray>> decode_rays_npy(std::string_view bytes, const std::st
   return rays;
 }
 
+namespace {
+
+template <typename T>
+void widen_into(std::string_view data, std::vector<double>& out) {
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    T value;
+    std::memcpy(&value, data.data() + i * sizeof(T), sizeof(T));
+    out[i] = static_cast<double>(value);
+  }
+}
+
+}  // namespace
+
+std::string npy_shape_text(const std::vector<uint64_t>& shape) {
+  return shape_text(shape);
+}
+
+Expected<NpyNumbers> decode_numeric_npy(std::string_view bytes, const std::string& name) {
+  OUTCORE_ASSIGN_OR_RETURN(NpyHeader header, parse_npy_header(bytes, name));
+  if (header.fortran_order) return invalid_argument(name + " is in Fortran order; C order is needed");
+  struct Kind {
+    const char* descr;
+    uint64_t size;
+    bool integral;
+    void (*widen)(std::string_view, std::vector<double>&);
+  };
+  static constexpr Kind kKinds[] = {
+      {"<f4", 4, false, widen_into<float>},   {"<f8", 8, false, widen_into<double>},
+      {"|i1", 1, true, widen_into<int8_t>},   {"|u1", 1, true, widen_into<uint8_t>},
+      {"|b1", 1, true, widen_into<uint8_t>},  {"<i2", 2, true, widen_into<int16_t>},
+      {"<u2", 2, true, widen_into<uint16_t>}, {"<i4", 4, true, widen_into<int32_t>},
+      {"<u4", 4, true, widen_into<uint32_t>}, {"<i8", 8, true, widen_into<int64_t>},
+      {"<u8", 8, true, widen_into<uint64_t>},
+  };
+  for (const Kind& kind : kKinds) {
+    if (header.descr != kind.descr) continue;
+    OUTCORE_ASSIGN_OR_RETURN(std::string_view data, array_data(bytes, name, header, kind.size));
+    NpyNumbers numbers;
+    numbers.shape = header.shape;
+    numbers.integral = kind.integral;
+    numbers.values.resize(data.size() / kind.size);
+    kind.widen(data, numbers.values);
+    return numbers;
+  }
+  return invalid_argument(name + " has dtype '" + header.descr +
+                          "'; a real or integer little-endian array is needed (e.g. float32, int64)");
+}
+
 Expected<std::vector<Ray>> read_rays_npy(const std::string& path) {
   OUTCORE_ASSIGN_OR_RETURN(std::string bytes, read_whole_file(path));
   return decode_rays_npy(bytes, path);

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/ray/ray_types.h"
@@ -28,6 +29,17 @@ struct NpyHeader {
 
 // Parses the header from the first bytes of a file (at least the whole header).
 Expected<NpyHeader> parse_npy_header(std::string_view bytes, const std::string& name);
+
+// Any real or integer array (C order; <f4, <f8, <i1..<i8, <u1..<u8, |b1),
+// every value converted to double: what the dynamic scene file's arrays
+// need. INVALID_ARGUMENT naming `name` for another dtype or Fortran order.
+struct NpyNumbers {
+  std::vector<uint64_t> shape;
+  std::vector<double> values;
+  bool integral = false;  // the dtype was an integer or bool one
+};
+Expected<NpyNumbers> decode_numeric_npy(std::string_view bytes, const std::string& name);
+std::string npy_shape_text(const std::vector<uint64_t>& shape);
 
 // Reads rays; (N,6) rows get tnear = 0, tfar = inf.
 Expected<std::vector<Ray>> read_rays_npy(const std::string& path);

@@ -45,6 +45,8 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
   stats.rays_entering_no_brick = 99;  // added after the list was made: its number is apart
   stats.brick_visits_without_hit = 98, stats.bricks_skipped_by_bound = 97;  // so were these
   stats.brick_rebuilds = 96, stats.builds_bvh = 95, stats.builds_grid = 94;
+  stats.dynamic_version = 93, stats.dynamic_instances = 92, stats.rays_hit_only_dynamic = 91;
+  stats.seconds_dynamic = 3.75;
   EXPECT_EQ(stats.to_json(),
             R"({"rays":1,"invalid_rays":2,"rays_hit":3,"upper_nodes_visited":4,"rays_entering_no_brick":99,)"
             R"("brick_visits":5,"brick_visits_without_hit":98,)"
@@ -55,9 +57,11 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
             R"("kdtree":0,"bsp":0,"grid":94,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"
             R"("evictions":15,"subtree_loads":16,"subtree_loads_checked":17,)"
             R"("subtree_loads_kept":18,"subtree_writes":19,"subtree_rejects":20,"subtree_bytes_read":21,)"
-            R"("subtree_bytes_written":22,"peak_bytes_resident":23,"cache_budget_bytes":24,)"
+            R"("subtree_bytes_written":22,)"
+            R"("dynamic":{"version":93,"instances":92,"rays_hit_only_dynamic":91},)"
+            R"("peak_bytes_resident":23,"cache_budget_bytes":24,)"
             R"("seconds":{"total":0.25,"upper":0.75,"build":1.25,"brick":1.75,"proxy":2.25,)"
-            R"("brick_builds_summed":2.75,"subtree_loads_summed":3.25},"rays_per_second":4})");
+            R"("brick_builds_summed":2.75,"subtree_loads_summed":3.25,"dynamic":3.75},"rays_per_second":4})");
   EXPECT_EQ(QueryStats().to_json(),
             R"({"rays":0,"invalid_rays":0,"rays_hit":0,"upper_nodes_visited":0,"rays_entering_no_brick":0,)"
             R"("brick_visits":0,"brick_visits_without_hit":0,)"
@@ -68,9 +72,11 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
             R"("kdtree":0,"bsp":0,"grid":0,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"
             R"("evictions":0,"subtree_loads":0,"subtree_loads_checked":0,)"
             R"("subtree_loads_kept":0,"subtree_writes":0,"subtree_rejects":0,"subtree_bytes_read":0,)"
-            R"("subtree_bytes_written":0,"peak_bytes_resident":0,"cache_budget_bytes":0,)"
+            R"("subtree_bytes_written":0,)"
+            R"("dynamic":{"version":0,"instances":0,"rays_hit_only_dynamic":0},)"
+            R"("peak_bytes_resident":0,"cache_budget_bytes":0,)"
             R"("seconds":{"total":0,"upper":0,"build":0,"brick":0,"proxy":0,)"
-            R"("brick_builds_summed":0,"subtree_loads_summed":0},"rays_per_second":0})");
+            R"("brick_builds_summed":0,"subtree_loads_summed":0,"dynamic":0},"rays_per_second":0})");
 }
 
 // Counts and times add up; the engine's state seen by the queries (the
@@ -80,9 +86,12 @@ TEST(QueryStatsList, AddingSumsCountsAndTakesTheLargerState) {
   const QueryStats three = numbered(3);
   QueryStats sum = one;
   sum += three;
-  const std::vector<std::string> maxed = {"proxy_bytes", "peak_bytes_resident", "cache_budget_bytes"};
+  const std::vector<std::string> maxed = {"proxy_bytes", "dynamic_version", "dynamic_instances",
+                                          "peak_bytes_resident", "cache_budget_bytes"};
   QueryStats want = numbered(4);
   want.proxy_bytes = three.proxy_bytes;
+  want.dynamic_version = three.dynamic_version;
+  want.dynamic_instances = three.dynamic_instances;
   want.peak_bytes_resident = three.peak_bytes_resident;
   want.cache_budget_bytes = three.cache_budget_bytes;
   EXPECT_EQ(sum.to_json(), want.to_json());

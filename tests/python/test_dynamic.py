@@ -157,3 +157,89 @@ def test_bad_input_is_a_named_error_and_changes_nothing(dynamic_server):
         after = client.cast_rays(rays)
         assert client.last_dynamic_version == version, "no failed change made a version"
         assert after["t_hit"].tobytes() == before["t_hit"].tobytes()
+
+
+def frames_of(count: int, instances: int) -> np.ndarray:
+    """(count, instances, 3, 4) placements: instance k at (FAR + 3k, 0, 0.5 frame)."""
+    t = np.zeros((count, instances, 3, 4))
+    for f in range(count):
+        for k in range(instances):
+            t[f, k] = placed_at(FAR + 3 * k, z=0.5 * f)
+    return t
+
+
+def test_trace_dynamic_file_answers_as_the_server_frame_by_frame(store, tmp_path):
+    from support import run_outcore
+    frames = frames_of(4, 3)
+    rays = np.concatenate([rays_up_at(FAR + 3 * k, 32, seed=k) for k in range(3)])
+    np.save(tmp_path / "rays.npy", rays)
+    plain, packed = tmp_path / "scene.npz", tmp_path / "scene_compressed.npz"
+    arrays = dict(mesh0_vertices=CUBE_VERTICES, mesh0_triangles=CUBE_TRIANGLES.astype(np.int64),
+                  instance_mesh=np.zeros(3, np.int32), transforms=frames)
+    np.savez(plain, **arrays)
+    np.savez_compressed(packed, **arrays)
+    hits = {}
+    for path in (plain, packed):
+        out, stats = tmp_path / f"{path.stem}.hits.npy", tmp_path / f"{path.stem}.json"
+        result = run_outcore("trace", store, "--rays", tmp_path / "rays.npy", "-o", out, "--dynamic", path,
+                             "--repeat", 4, "--stats-json", stats)
+        assert result.returncode == 0, result.stderr
+        hits[path] = np.load(out)
+        import json
+        runs = json.loads(stats.read_text())
+        assert [r["dynamic"]["version"] for r in runs] == [4, 5, 6, 7]  # a mesh, 3 instances, then 3 frames
+        assert all(r["dynamic"]["instances"] == 3 for r in runs)
+    assert hits[plain].tobytes() == hits[packed].tobytes()
+    # The last batch saw frame 3: the same as a server given the same changes.
+    server = Server(store)
+    try:
+        with outcore.SceneClient(server.address, timeout=60) as client:
+            mesh = client.add_mesh(CUBE_VERTICES, CUBE_TRIANGLES)
+            ids = [client.add_instance(mesh, frames[0, k]) for k in range(3)]
+            client.update_transforms(ids, frames[3])
+            ans = client.cast_rays(rays)
+    finally:
+        assert server.stop() == 0
+    got = hits[plain]
+    assert got["t_hit"].tobytes() == ans["t_hit"].tobytes()
+    assert got["geometry_id"].tobytes() == ans["geometry_ids"].tobytes()
+    assert got["primitive_id"].tobytes() == ans["primitive_ids"].tobytes()
+    assert np.allclose(got["t_hit"], 11.5, rtol=1e-6, atol=0)
+
+
+def test_trace_dynamic_file_errors_name_the_file_and_array(store, tmp_path):
+    from test_auto import run_failing
+    rays = rays_up_at(FAR)
+    np.save(tmp_path / "rays.npy", rays)
+
+    def fails(name, words, **arrays):
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, **arrays)
+        result = run_failing("trace", store, "--rays", tmp_path / "rays.npy", "-o", tmp_path / "h.npy",
+                             "--dynamic", path, "--repeat", 3)
+        assert str(path) in result.stderr and words in result.stderr, result.stderr
+        assert not (tmp_path / "h.npy").exists()
+        return path
+
+    good = dict(mesh0_vertices=CUBE_VERTICES, mesh0_triangles=CUBE_TRIANGLES, instance_mesh=np.zeros(1, np.int64),
+                transforms=frames_of(3, 1))
+    fails("no_mesh", "no meshes", instance_mesh=good["instance_mesh"], transforms=good["transforms"])
+    fails("unknown", "unknown array 'colours'", colours=np.zeros(3), **good)
+    fails("bad_mesh", "instance 0 names mesh 4", **{**good, "instance_mesh": np.array([4])})
+    fails("shape", "array transforms has shape (3, 1, 4, 3)", **{**good, "transforms": np.zeros((3, 1, 4, 3))})
+    fails("float_index", "mesh0_triangles must be an integer array",
+          **{**good, "mesh0_triangles": CUBE_TRIANGLES.astype(np.float32)})
+    nan = frames_of(3, 1)
+    nan[2, 0, 0, 0] = np.nan
+    fails("nan_frame", "frame 2", **{**good, "transforms": nan})
+    path = tmp_path / "broken.npz"
+    np.savez(path, **good)
+    whole = path.read_bytes()
+    path.write_bytes(whole[: len(whole) // 2])
+    result = run_failing("trace", store, "--rays", tmp_path / "rays.npy", "-o", tmp_path / "h.npy", "--dynamic", path)
+    assert str(path) in result.stderr and "ZIP" in result.stderr, result.stderr
+    corrupt = bytearray(whole)
+    corrupt[200] ^= 0xFF  # inside the first member's data
+    path.write_bytes(bytes(corrupt))
+    result = run_failing("trace", store, "--rays", tmp_path / "rays.npy", "-o", tmp_path / "h.npy", "--dynamic", path)
+    assert str(path) in result.stderr and "CRC-32 mismatch" in result.stderr, result.stderr
