@@ -79,8 +79,11 @@ Status apply_zip64(std::string_view extra, Member& m, const std::string& what) {
 }
 
 Expected<std::string> inflate_member(std::string_view data, uint64_t size, const std::string& what) {
-  if (size > (uint64_t{1} << 40))
-    return invalid_argument(what + ": claims " + std::to_string(size) + " bytes");
+  // Deflate expands at most ~1032:1: a larger claim is a corrupt header, and
+  // must not become an allocation.
+  if (size > data.size() * 1100 + 1024)
+    return data_loss(what + " claims to inflate " + std::to_string(data.size()) + " bytes to " +
+                     std::to_string(size) + " (corrupt header)");
   std::string out(size, '\0');
   z_stream zs{};
   if (inflateInit2(&zs, -MAX_WBITS) != Z_OK) return internal_error(what + ": zlib would not start");
