@@ -9,7 +9,9 @@
 //   3. a scrambling motion: the rebuild trigger fires;
 //   4. transforms of 10,000 instances in one update_transforms;
 //   5. query throughput while updates stream in at 30 a second, against no
-//      updates.
+//      updates;
+//   6. the two top levels over moving instances (8-wide BVH, B-KD tree):
+//      update time, and trace after 100 frames against a rebuild.
 // Usage: outcore_dynamic_bench [--runs 7] [--grid 708] [--instances 10000]
 // Prints one table; writes nothing.
 #include <embree3/rtcore.h>
@@ -209,6 +211,70 @@ void mesh_rows(int grid, int runs) {
       "trigger fires");
 }
 
+// The two top levels over the same moving instances: update time, and trace
+// time after 100 frames of motion against a rebuild of the last frame.
+void top_level_rows(int count, int runs) {
+  const HeightField small = height_field(16);
+  const int side = static_cast<int>(std::ceil(std::sqrt(count)));
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<double> step(-0.3, 0.3);
+  std::vector<double> start(12 * count);
+  for (int k = 0; k < count; ++k) {
+    const double rows[12] = {1, 0, 0, 2.0 * (k % side), 0, 1, 0, 2.0 * (k / side), 0, 0, 1, 0};
+    std::memcpy(&start[12 * k], rows, sizeof rows);
+  }
+  std::vector<std::vector<double>> frames(100, start);
+  for (int f = 1; f < 100; ++f) {
+    frames[f] = frames[f - 1];
+    for (int k = 0; k < count; ++k) {
+      frames[f][12 * k + 3] += step(rng);
+      frames[f][12 * k + 7] += step(rng);
+      frames[f][12 * k + 11] += 0.1 * step(rng);
+    }
+  }
+  std::uniform_real_distribution<float> u(0, 1);
+  std::vector<Ray> rays(1'000'000);
+  for (Ray& r : rays) {
+    r.origin = {u(rng) * 2 * side, u(rng) * 2 * side, 5.0f};
+    r.direction = {0.4f * (u(rng) - 0.5f), 0.4f * (u(rng) - 0.5f), -1.0f};
+  }
+  std::vector<Hit> reference;
+  for (const DynamicTopLevel kind : {DynamicTopLevel::kBvh, DynamicTopLevel::kBkd}) {
+    const char* name = kind == DynamicTopLevel::kBvh ? "8-wide BVH" : "B-KD tree";
+    DynamicScene scene(0, kind);
+    const uint32_t mesh = scene.add_mesh(small.base, small.triangles)->id;
+    std::vector<uint32_t> ids;
+    for (int k = 0; k < count; ++k)
+      ids.push_back(scene.add_instance(mesh, std::span(&start[12 * k], 12))->id);
+    std::vector<double> updates;
+    for (int f = 1; f < 100; ++f)
+      updates.push_back(seconds_of([&] { (void)scene.update_transforms(ids, frames[f]); }));
+    const auto refitted = scene.latest();
+    DynamicSnapshot fresh = *refitted;
+    const double build = seconds_of([&] { build_dynamic_top_level(fresh); });
+    std::vector<Hit> a(rays.size()), b(rays.size());
+    std::vector<double> ta, tb;
+    for (int r = 0; r < runs; ++r) {
+      std::fill(a.begin(), a.end(), Hit{});
+      std::fill(b.begin(), b.end(), Hit{});
+      ta.push_back(seconds_of([&] { refitted->intersect(rays, a); }));
+      tb.push_back(seconds_of([&] { fresh.intersect(rays, b); }));
+    }
+    const bool same =
+        std::memcmp(a.data(), b.data(), a.size() * sizeof(Hit)) == 0 &&
+        (reference.empty() || std::memcmp(a.data(), reference.data(), a.size() * sizeof(Hit)) == 0);
+    if (reference.empty()) reference = a;
+    const auto c = scene.counters();
+    row((std::string(name) + ": update (99 frames) / build of the top level").c_str(),
+        ms(median(updates)) + " / " + ms(build) + " (" + std::to_string(c.top_rebuilds - count) +
+            " rebuilds)",
+        "", "");
+    row((std::string(name) + ": trace after 100 frames, refitted / rebuilt").c_str(),
+        ms(median(ta)) + " / " + ms(median(tb)) + (same ? " (same hits)" : " (HITS DIFFER)"),
+        "speed " + times(median(tb) / median(ta)) + " of rebuilt", ">= 0.9x");
+  }
+}
+
 void instance_rows(int count, int runs) {
   DynamicScene scene;
   const HeightField small = height_field(16);  // 512 triangles
@@ -297,5 +363,6 @@ int main(int argc, char** argv) {
   std::printf("%-58s %-34s %-28s %s\n", "what", "figure (median)", "ratio (same run)", "target");
   outcore::mesh_rows(grid, runs);
   outcore::instance_rows(instances, runs);
+  outcore::top_level_rows(instances, runs);
   return 0;
 }

@@ -95,14 +95,21 @@ void add_cache_options(CLI::App& command, EngineCliOptions& options) {
       ->capture_default_str();
   command.add_option("--policy", options.policy, "Cache eviction policy")->capture_default_str();
   command.add_option("--brick-accel", options.brick_accel, "Brick structure")->capture_default_str();
-  command.add_option("--profile", options.profile,
-                     "Cost profile of --brick-accel auto (from `outcore calibrate`; default: "
-                     "$OUTCORE_COST_PROFILE, else $XDG_CONFIG_HOME/outcore/cost_profile.txt if it exists, else "
-                     "built-in)");
+  command.add_option(
+      "--profile", options.profile,
+      "Cost profile of --brick-accel auto (from `outcore calibrate`; default: "
+      "$OUTCORE_COST_PROFILE, else $XDG_CONFIG_HOME/outcore/cost_profile.txt if it exists, else "
+      "built-in)");
   command
       .add_option("--brick-bounds", options.brick_bounds,
                   "Bound tested before a brick beyond the upper hierarchy's box: aabb (none), sphere or obb "
                   "(fitted at pack time; answers are the same, brick visits without a hit fewer)")
+      ->capture_default_str();
+  command
+      .add_option(
+          "--dynamic-top", options.dynamic_top_level,
+          "Structure over the dynamic layer's instances: bvh (8-wide, refitted) or bkd (the B-KD tree); "
+          "answers are the same")
       ->capture_default_str();
   add_subtree_options(command, options.subtree);
 }
@@ -127,6 +134,9 @@ Status apply_engine_options(const EngineCliOptions& cli, EngineOptions& options)
     return invalid_argument("--brick-bounds must be aabb, sphere or obb, got '" + cli.brick_bounds + "'");
   }
   options.brick_bounds = cli.brick_bounds;
+  if (cli.dynamic_top_level != "bvh" && cli.dynamic_top_level != "bkd")
+    return invalid_argument("--dynamic-top must be bvh or bkd, got '" + cli.dynamic_top_level + "'");
+  options.dynamic_top_level = cli.dynamic_top_level;
   // --reference names the structure, which the subtree check needs.
   OUTCORE_RETURN_IF_ERROR(apply_brick_structure_choices(cli, options));
   return apply_subtree_options(cli.subtree, options);

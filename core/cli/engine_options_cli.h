@@ -28,6 +28,7 @@ struct EngineCliOptions {
   std::string policy = "lru";
   std::string brick_accel = kDefaultBrickAccel;
   std::string brick_bounds = kDefaultBrickBounds;
+  std::string dynamic_top_level = "bvh";
   std::string profile;  // --profile: the cost profile of --brick-accel auto
   SubtreeCliOptions subtree;
   bool no_proxies = false;

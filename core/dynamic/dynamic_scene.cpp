@@ -31,9 +31,11 @@ void replace_mesh_box(DynamicInstance& instance, const DynamicMesh& mesh) {
 
 }  // namespace
 
-DynamicScene::DynamicScene(uint32_t first_geometry_id)
+DynamicScene::DynamicScene(uint32_t first_geometry_id, DynamicTopLevel top_level)
     : first_geometry_id_(first_geometry_id), next_geometry_id_(first_geometry_id) {
-  versions_.push_back(std::make_shared<const DynamicSnapshot>());
+  auto empty = std::make_shared<DynamicSnapshot>();
+  empty->top_kind = top_level;
+  versions_.push_back(std::move(empty));
 }
 
 std::shared_ptr<const DynamicSnapshot> DynamicScene::latest() const {

@@ -46,7 +46,7 @@ class DynamicScene {
  public:
   static constexpr std::size_t kKeptVersions = 16;
 
-  explicit DynamicScene(uint32_t first_geometry_id = 0);
+  explicit DynamicScene(uint32_t first_geometry_id = 0, DynamicTopLevel top_level = DynamicTopLevel::kBvh);
 
   // vertices: x, y, z each; triangles: 3 vertex indices each. Returns the mesh id.
   Expected<DynamicAdded> add_mesh(std::span<const float> vertices, std::span<const uint32_t> triangles);

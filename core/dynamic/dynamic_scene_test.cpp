@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -209,6 +210,51 @@ TEST_F(DynamicSceneTest, RefitsAnswerBitwiseAsFreshBuildsOfTheSameVersion) {
   EXPECT_EQ(c.mesh_rebuilds, 0u) << "smooth motion refits";
   EXPECT_EQ(c.mesh_refits, 30u);
   EXPECT_GT(c.top_refits, 0u);
+}
+
+TEST_F(DynamicSceneTest, TheBkdTopLevelAnswersAsTheBvhOneThroughUpdatesAndRebuilds) {
+  DynamicScene bvh, bkd(0, DynamicTopLevel::kBkd);
+  std::vector<uint32_t> ids;
+  for (DynamicScene* scene : {&bvh, &bkd}) {
+    const uint32_t mesh = scene->add_mesh(torus_.vertices, torus_.triangles)->id;
+    ids.clear();
+    for (int k = 0; k < 50; ++k)
+      ids.push_back(
+          scene->add_instance(mesh, placement(0.2 * k, 0.2, {3.0 * (k % 10), 3.0 * (k / 10), 0.1 * k}))->id);
+  }
+  EXPECT_FALSE(bkd.latest()->bkd.empty());
+  EXPECT_TRUE(bkd.latest()->top.empty());
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> step(-0.5, 0.5);
+  std::vector<Vec3d> at(50);
+  for (int k = 0; k < 50; ++k) at[k] = {3.0 * (k % 10), 3.0 * (k / 10), 0.1 * k};
+  for (int frame = 1; frame <= 40; ++frame) {
+    // A random walk, then (frames 31-40) every instance somewhere else.
+    std::vector<double> transforms;
+    for (int k = 0; k < 50; ++k) {
+      at[k] = frame > 30 ? Vec3d(step(rng), step(rng), step(rng)) * 60.0  // scrambled: anywhere
+                         : at[k] + Vec3d(step(rng), step(rng), step(rng));
+      const auto t = placement(0.2 * k + 0.1 * frame, 0.2, at[k]);
+      transforms.insert(transforms.end(), t.begin(), t.end());
+    }
+    ASSERT_TRUE(bvh.update_transforms(ids, transforms).ok());
+    ASSERT_TRUE(bkd.update_transforms(ids, transforms).ok());
+    if (frame % 10 != 0) continue;
+    Aabb box;
+    for (const auto& i : bvh.latest()->instances) box.extend(i.world_box);
+    const std::vector<Ray> rays = rays_through(box, 1500, frame);
+    const std::vector<Hit> hits = trace(*bkd.latest(), rays);
+    EXPECT_GT(std::count_if(hits.begin(), hits.end(), [](const Hit& h) { return h.is_hit(); }), 20);
+    expect_bitwise(hits, trace(*bvh.latest(), rays), "frame " + std::to_string(frame));
+    expect_bitwise(hits, trace(rebuilt(*bkd.latest()), rays), "rebuilt, frame " + std::to_string(frame));
+    std::vector<uint8_t> a(rays.size()), b(rays.size());
+    bkd.latest()->occluded(rays, a);
+    bvh.latest()->occluded(rays, b);
+    EXPECT_EQ(a, b);
+  }
+  EXPECT_GT(bkd.counters().top_refits, 0u);
+  EXPECT_GT(bkd.counters().top_rebuilds, 50u) << "scrambled by the last frames: rebuilt";
+  EXPECT_GT(bvh.counters().top_rebuilds, 50u) << "scrambled by the last frames: rebuilt";
 }
 
 TEST_F(DynamicSceneTest, AScramblingMotionTriggersARebuild) {

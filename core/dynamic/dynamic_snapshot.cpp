@@ -78,11 +78,76 @@ void walk_top(const DynamicSnapshot& s, const WorldRay& r, double tnear, const L
   }
 }
 
+// The B-KD tree's walk: each node clips the ray's interval to its children's
+// slabs along its axis; a leaf's instance is visited when the ray may meet
+// its whole box.
+template <typename Limit, typename Visit>
+void walk_bkd(const DynamicSnapshot& s, const WorldRay& r, double tnear, const Limit& limit,
+              const Visit& visit) {
+  const std::vector<BkdNode>& nodes = s.bkd.nodes();
+  if (nodes.empty()) return;
+  struct Entry {
+    uint32_t node;
+    double t0, t1;
+  };
+  std::array<Entry, BkdTree::kMaxDepth + 2> stack;
+  std::size_t depth = 0;
+  stack[depth++] = {0, tnear, limit()};
+  while (depth > 0) {
+    const Entry e = stack[--depth];
+    if (e.t0 > limit()) continue;
+    const BkdNode& node = nodes[e.node];
+    const double o = r.origin[node.axis], d = r.direction[node.axis];
+    Entry kids[2];
+    bool live[2] = {false, false};
+    for (int c = 0; c < 2; ++c) {
+      const double lo = static_cast<double>(node.lo[c]) - r.pad, hi = static_cast<double>(node.hi[c]) + r.pad;
+      double t0 = e.t0, t1 = std::min(e.t1, limit());
+      if (d == 0.0) {
+        if (o < lo || o > hi) continue;
+      } else {
+        double near = (lo - o) / d, far = (hi - o) / d;
+        if (near > far) std::swap(near, far);
+        t0 = std::max(t0, near);
+        t1 = std::min(t1, far);
+      }
+      if (t0 > t1) continue;
+      if ((node.leaf_mask >> c) & 1u) {
+        const uint32_t instance = node.child[c];
+        if (c == 1 && node.child[0] == instance && ((node.leaf_mask & 1u) != 0)) continue;  // one instance
+        if (may_enter(r, s.instances[instance].world_box, tnear, limit()) && !visit(instance)) return;
+      } else {
+        kids[c] = {node.child[c], t0, t1};
+        live[c] = true;
+      }
+    }
+    // The nearer child on top of the stack.
+    const int first = live[0] && live[1] ? (kids[0].t0 <= kids[1].t0 ? 0 : 1) : (live[0] ? 0 : 1);
+    if (live[1 - first]) {
+      assert(depth < stack.size());
+      stack[depth++] = kids[1 - first];
+    }
+    if (live[first]) {
+      assert(depth < stack.size());
+      stack[depth++] = kids[first];
+    }
+  }
+}
+
+template <typename Limit, typename Visit>
+void walk_instances(const DynamicSnapshot& s, const WorldRay& r, double tnear, const Limit& limit,
+                    const Visit& visit) {
+  if (s.top_kind == DynamicTopLevel::kBkd) {
+    walk_bkd(s, r, tnear, limit, visit);
+  } else {
+    walk_top(s, r, tnear, limit, visit);
+  }
+}
+
 double scene_magnitude(const DynamicSnapshot& s) {
-  if (s.top.empty()) return 0;
   Aabb box;
-  for (uint32_t k = 0; k < kWideBvhWidth; ++k)
-    if ((s.top[0].child_mask() >> k) & 1u) box.extend(s.top[0].box(k));
+  for (const DynamicInstance& instance : s.instances) box.extend(instance.world_box);
+  if (box.empty()) return 0;
   return std::max(max_abs(Vec3d(box.lo)), max_abs(Vec3d(box.hi)));
 }
 
@@ -120,7 +185,7 @@ uint64_t DynamicSnapshot::intersect(std::span<const Ray> rays, std::span<Hit> hi
     const bool was_hit = best.is_hit();
     const WorldRay r = world_ray(ray, slack, magnitude);
     const auto limit = [&] { return std::min(static_cast<double>(ray.tfar), static_cast<double>(best.t)); };
-    walk_top(*this, r, ray.tnear, limit, [&](uint32_t index) {
+    walk_instances(*this, r, ray.tnear, limit, [&](uint32_t index) {
       const DynamicInstance& instance = instances[index];
       Ray local = instance.to_object.ray_to_object(ray);
       local.tfar = std::min(ray.tfar, best.t);
@@ -149,7 +214,7 @@ uint64_t DynamicSnapshot::occluded(std::span<const Ray> rays, std::span<uint8_t>
     if (occluded[i] != 0) return false;
     const WorldRay r = world_ray(ray, slack, magnitude);
     const auto limit = [&] { return static_cast<double>(ray.tfar); };
-    walk_top(*this, r, ray.tnear, limit, [&](uint32_t index) {
+    walk_instances(*this, r, ray.tnear, limit, [&](uint32_t index) {
       const DynamicInstance& instance = instances[index];
       const Ray local = instance.to_object.ray_to_object(ray);
       const uint32_t id = 0;
@@ -192,14 +257,29 @@ std::vector<Aabb> world_boxes(const DynamicSnapshot& s) {
 }  // namespace
 
 void build_dynamic_top_level(DynamicSnapshot& snapshot) {
-  snapshot.top = build_wide_top_level(world_boxes(snapshot));
-  snapshot.top_built_cost = wide_bvh_sah_cost(snapshot.top);
+  const std::vector<Aabb> boxes = world_boxes(snapshot);
+  if (snapshot.top_kind == DynamicTopLevel::kBkd) {
+    snapshot.top.clear();
+    snapshot.bkd = BkdTree::build(boxes);
+    snapshot.top_built_cost = snapshot.bkd.cost(boxes);
+  } else {
+    snapshot.bkd = BkdTree();
+    snapshot.top = build_wide_top_level(boxes);
+    snapshot.top_built_cost = wide_bvh_sah_cost(snapshot.top);
+  }
 }
 
 bool refit_dynamic_top_level(DynamicSnapshot& snapshot) {
   const std::vector<Aabb> boxes = world_boxes(snapshot);
-  refit_wide_top_level(snapshot.top, boxes);
-  if (wide_bvh_sah_cost(snapshot.top) <= DynamicMesh::kRebuildRatio * snapshot.top_built_cost) return false;
+  double cost = 0;
+  if (snapshot.top_kind == DynamicTopLevel::kBkd) {
+    snapshot.bkd.refit(boxes);
+    cost = snapshot.bkd.cost(boxes);
+  } else {
+    refit_wide_top_level(snapshot.top, boxes);
+    cost = wide_bvh_sah_cost(snapshot.top);
+  }
+  if (cost <= DynamicMesh::kRebuildRatio * snapshot.top_built_cost) return false;
   build_dynamic_top_level(snapshot);
   return true;
 }

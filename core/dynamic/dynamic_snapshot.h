@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "core/accel/bvh/wide_bvh.h"
+#include "core/dynamic/bkd_tree.h"
 #include "core/dynamic/dynamic_mesh.h"
 #include "core/geometry/affine_transform.h"
 #include "core/ray/ray_types.h"
@@ -40,11 +41,18 @@ struct DynamicInstance {
   double slack = 0;
 };
 
+// The structure over the instances: an 8-wide BVH (the default) or the
+// seed's B-KD tree (bkd_tree.h); both refitted on updates, rebuilt past
+// DynamicMesh::kRebuildRatio x their cost when built. Answers are the same.
+enum class DynamicTopLevel : uint8_t { kBvh, kBkd };
+
 struct DynamicSnapshot {
   uint64_t version = 0;
+  DynamicTopLevel top_kind = DynamicTopLevel::kBvh;
   std::vector<std::shared_ptr<const DynamicMesh>> meshes;  // by mesh id
   std::vector<DynamicInstance> instances;                  // live ones, by geometry id
-  std::vector<WideBvhNode> top;                            // leaf child = index into instances
+  std::vector<WideBvhNode> top;                            // kBvh: leaf child = index into instances
+  BkdTree bkd;                                             // kBkd
   double top_built_cost = 0;                               // the top level's cost when last built
 
   // For each ray: the closest dynamic hit within [tnear, min(tfar, hits[i].t)],

@@ -14,7 +14,8 @@ namespace outcore {
 
 QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
                          std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report,
-                         bool cache_fits_scene, uint64_t bricks_budget_holds)
+                         bool cache_fits_scene, uint64_t bricks_budget_holds,
+                         DynamicTopLevel dynamic_top_level)
     : store_(std::move(store)),
       cache_(std::move(cache)),
       proxies_(std::move(proxies)),
@@ -23,7 +24,7 @@ QueryEngine::QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_pt
       bricks_budget_holds_(bricks_budget_holds),
       upper_walks_(std::make_unique<const UpperWalks>(store_->manifest().upper)),
       scratch_pool_(kKeptScratches, keep_batch_scratch),
-      dynamic_(static_cast<uint32_t>(store_->manifest().inputs.size())) {}
+      dynamic_(static_cast<uint32_t>(store_->manifest().inputs.size()), dynamic_top_level) {}
 
 QueryEngine::~QueryEngine() = default;
 
@@ -36,6 +37,10 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::open(const std::string& stor
 Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const SceneStore> store,
                                                            const EngineOptions& options) {
   if (options.cache_bytes == 0) return invalid_argument("the cache budget must be positive");
+  if (options.dynamic_top_level != "bvh" && options.dynamic_top_level != "bkd")
+    return invalid_argument("--dynamic-top must be bvh or bkd, got '" + options.dynamic_top_level + "'");
+  const DynamicTopLevel dynamic_top =
+      options.dynamic_top_level == "bkd" ? DynamicTopLevel::kBkd : DynamicTopLevel::kBvh;
   BrickAccelOptions accel_options = options.accel_options;
   OUTCORE_ASSIGN_OR_RETURN(auto builder, make_brick_builder(options.brick_accel, accel_options));
   OUTCORE_ASSIGN_OR_RETURN(auto policy, make_eviction_policy(options.eviction_policy));
@@ -81,9 +86,9 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
   if (!options.subtree_dir.empty())
     OUTCORE_RETURN_IF_ERROR(cache->enable_subtree_tier(
         {options.subtree_dir, options.subtree_max_bytes, options.subtree_release_batch_bytes}));
-  auto engine = std::unique_ptr<QueryEngine>(new QueryEngine(std::move(store), std::move(cache),
-                                                             std::move(proxies), std::move(proxy_report),
-                                                             cache_fits_scene, bricks_budget_holds));
+  auto engine = std::unique_ptr<QueryEngine>(
+      new QueryEngine(std::move(store), std::move(cache), std::move(proxies), std::move(proxy_report),
+                      cache_fits_scene, bricks_budget_holds, dynamic_top));
   engine->accel_options_ = std::move(accel_options);
   engine->bounds_ = std::move(bounds);
   return engine;

@@ -71,6 +71,9 @@ struct EngineOptions {
   // The bound tested before a brick beyond the upper hierarchy's box:
   // "aabb" (none), "sphere" or "obb" (core/upper/brick_bounds.h).
   std::string brick_bounds = kDefaultBrickBounds;
+  // The dynamic layer's structure over its instances: "bvh" (an 8-wide BVH)
+  // or "bkd" (the seed's B-KD tree); answers are the same.
+  std::string dynamic_top_level = "bvh";
   // When set, the cache records every brick acquisition into it
   // (core/cache/access_trace.h); close it after the engine is destroyed.
   std::shared_ptr<AccessTraceWriter> access_trace;
@@ -167,7 +170,7 @@ class QueryEngine {
  private:
   QueryEngine(std::shared_ptr<const SceneStore> store, std::unique_ptr<BrickCache> cache,
               std::unique_ptr<const ProxySet> proxies, ProxyOpenReport proxy_report, bool cache_fits_scene,
-              uint64_t bricks_budget_holds);
+              uint64_t bricks_budget_holds, DynamicTopLevel dynamic_top_level);
 
   // Plans the batch (batch_planner.h) and runs its strategy (strategy.h).
   template <QueryKind kKind>

@@ -243,3 +243,27 @@ def test_trace_dynamic_file_errors_name_the_file_and_array(store, tmp_path):
     path.write_bytes(bytes(corrupt))
     result = run_failing("trace", store, "--rays", tmp_path / "rays.npy", "-o", tmp_path / "h.npy", "--dynamic", path)
     assert str(path) in result.stderr and "CRC-32 mismatch" in result.stderr, result.stderr
+
+
+def test_a_bkd_top_level_server_answers_as_the_bvh_one(store):
+    answers = []
+    for top in ("bvh", "bkd"):
+        server = Server(store, "--dynamic-top", top)
+        try:
+            with outcore.SceneClient(server.address, timeout=60) as client:
+                mesh = client.add_mesh(CUBE_VERTICES, CUBE_TRIANGLES)
+                ids = [client.add_instance(mesh, placed_at(FAR + 2 * k, y=0.3 * k)) for k in range(20)]
+                rng = np.random.default_rng(3)
+                for frame in range(5):
+                    t = np.stack([placed_at(FAR + 2 * k + rng.uniform(-1, 1), y=0.3 * k) for k in range(20)])
+                    client.update_transforms(ids, t)
+                rays = np.concatenate([rays_up_at(FAR + 2 * k, 16, seed=k) for k in range(20)])
+                answers.append(client.cast_rays(rays))
+        finally:
+            assert server.stop() == 0
+    for key in ("t_hit", "geometry_ids", "primitive_ids", "primitive_normals"):
+        assert answers[0][key].tobytes() == answers[1][key].tobytes(), key
+    assert np.any(answers[0]["primitive_ids"] != outcore.INVALID_ID)
+    from test_auto import run_failing
+    result = run_failing("serve", store, "--listen", "127.0.0.1:0", "--dynamic-top", "octree")
+    assert "--dynamic-top must be bvh or bkd, got 'octree'" in result.stderr
