@@ -77,6 +77,7 @@ void BkdTree::refit(std::span<const Aabb> boxes) {
     }
     below[i] = all;
   }
+  bounds_ = nodes_.empty() ? Aabb{} : below[0];
 }
 
 double BkdTree::cost(std::span<const Aabb> boxes) const {

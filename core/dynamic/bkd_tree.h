@@ -43,6 +43,9 @@ class BkdTree {
   double cost(std::span<const Aabb> boxes) const;
 
   const std::vector<BkdNode>& nodes() const { return nodes_; }
+  // The union of the boxes: a ray's interval is clipped to it first, since
+  // an axis no node splits along would otherwise never bound it.
+  const Aabb& bounds() const { return bounds_; }
   bool empty() const { return nodes_.empty(); }
 
   // Enough for any tree build() makes (median splits: depth <= log2 n + 1).
@@ -51,6 +54,7 @@ class BkdTree {
  private:
   uint32_t make(std::span<uint32_t> items, std::span<const Aabb> boxes);
   std::vector<BkdNode> nodes_;
+  Aabb bounds_;
 };
 
 }  // namespace outcore

@@ -90,9 +90,25 @@ void walk_bkd(const DynamicSnapshot& s, const WorldRay& r, double tnear, const L
     uint32_t node;
     double t0, t1;
   };
+  // Clipped to the whole tree's box first (may_enter's slab test, kept).
+  double t0 = tnear, t1 = limit();
+  for (int a = 0; a < 3 && t0 <= t1; ++a) {
+    const double lo = static_cast<double>(s.bkd.bounds().lo[a]) - r.pad;
+    const double hi = static_cast<double>(s.bkd.bounds().hi[a]) + r.pad;
+    const double o = r.origin[a], d = r.direction[a];
+    if (d == 0.0) {
+      if (o < lo || o > hi) return;
+      continue;
+    }
+    double near = (lo - o) / d, far = (hi - o) / d;
+    if (near > far) std::swap(near, far);
+    t0 = std::max(t0, near);
+    t1 = std::min(t1, far);
+  }
+  if (t0 > t1) return;
   std::array<Entry, BkdTree::kMaxDepth + 2> stack;
   std::size_t depth = 0;
-  stack[depth++] = {0, tnear, limit()};
+  stack[depth++] = {0, t0, t1};
   while (depth > 0) {
     const Entry e = stack[--depth];
     if (e.t0 > limit()) continue;
@@ -279,7 +295,7 @@ bool refit_dynamic_top_level(DynamicSnapshot& snapshot) {
     refit_wide_top_level(snapshot.top, boxes);
     cost = wide_bvh_sah_cost(snapshot.top);
   }
-  if (cost <= DynamicMesh::kRebuildRatio * snapshot.top_built_cost) return false;
+  if (cost <= kTopLevelRebuildRatio * snapshot.top_built_cost) return false;
   build_dynamic_top_level(snapshot);
   return true;
 }

@@ -43,7 +43,13 @@ struct DynamicInstance {
 
 // The structure over the instances: an 8-wide BVH (the default) or the
 // seed's B-KD tree (bkd_tree.h); both refitted on updates, rebuilt past
-// DynamicMesh::kRebuildRatio x their cost when built. Answers are the same.
+// kTopLevelRebuildRatio x their cost when built. Answers are the same.
+enum class DynamicTopLevel : uint8_t;
+// Lower than a mesh's 1.5: a top level builds in about the time of a
+// transform update (10,000 instances: ~2.5 ms), and a refitted one over
+// instances that wander loses speed faster than a deforming mesh does
+// (docs/BENCHMARKS.md, "Dynamic geometry").
+inline constexpr double kTopLevelRebuildRatio = 1.1;
 enum class DynamicTopLevel : uint8_t { kBvh, kBkd };
 
 struct DynamicSnapshot {
@@ -74,7 +80,7 @@ struct DynamicSnapshot {
 void build_dynamic_top_level(DynamicSnapshot& snapshot);
 // Refits `snapshot.top` to its instances' world boxes (same instances in the
 // same order); builds afresh when the refitted cost exceeds
-// DynamicMesh::kRebuildRatio x top_built_cost. Returns whether it rebuilt.
+// kTopLevelRebuildRatio x top_built_cost. Returns whether it rebuilt.
 bool refit_dynamic_top_level(DynamicSnapshot& snapshot);
 
 }  // namespace outcore
