@@ -107,6 +107,23 @@ Status BrickCache::too_large(uint32_t brick_id, uint64_t reservation) const {
                             "; raise the budget or repack with smaller bricks");
 }
 
+PinnedBrick BrickCache::make_pin(uint32_t brick_id, const BrickAccel* accel, bool was_hit) {
+  PinnedBrick pin;
+  pin.cache_ = this;
+  pin.accel_ = accel;
+  pin.brick_ = brick_id;
+  pin.was_hit_ = was_hit;
+  return pin;
+}
+
+void BrickCache::count_build(const BrickAccel& accel, uint64_t bytes, double seconds) {
+  ++counters_.builds;
+  const std::size_t structure = brick_structure_index(builder_->structure_of(accel));
+  if (structure < kMaxBrickStructures) ++counters_.builds_by_structure[structure];
+  counters_.bytes_built += bytes;
+  counters_.build_seconds += seconds;
+}
+
 Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays) {
   if (brick_id >= entries_.size()) {
     // The same code and words as SceneStore::load_brick for the same mistake.
@@ -134,11 +151,7 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays) {
       ++entry.pins;
       policy_->on_access(brick_id);
       ++(waited ? counters_.misses : counters_.hits);
-      PinnedBrick pin;
-      pin.cache_ = this;
-      pin.accel_ = entry.accel.get();
-      pin.brick_ = brick_id;
-      pin.was_hit_ = !waited;
+      PinnedBrick pin = make_pin(brick_id, entry.accel.get(), !waited);
       if (trace_) {
         auto chunk = record_access(brick_id, entry.bytes, reservation, 0.0,
                                    waited ? AccessOutcome::kWait : AccessOutcome::kHit, rays);
@@ -209,18 +222,8 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays) {
   policy_->on_insert(brick_id, bytes, seconds);
   ++counters_.misses;
   ++counters_.resident_bricks;
-  if (!loaded) {
-    ++counters_.builds;
-    const std::size_t structure = brick_structure_index(builder_->structure_of(*entry.accel));
-    if (structure < kMaxBrickStructures) ++counters_.builds_by_structure[structure];
-    counters_.bytes_built += bytes;
-    counters_.build_seconds += seconds;
-  }
-  PinnedBrick pin;
-  pin.cache_ = this;
-  pin.accel_ = entry.accel.get();
-  pin.brick_ = brick_id;
-  pin.was_hit_ = false;
+  if (!loaded) count_build(*entry.accel, bytes, seconds);
+  PinnedBrick pin = make_pin(brick_id, entry.accel.get(), false);
   const uint64_t resident = counters_.resident_bytes;
   std::vector<AccessRecord> chunk;
   if (trace_) {

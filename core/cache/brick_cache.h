@@ -167,6 +167,10 @@ class BrickCache {
   };
 
   void unpin(uint32_t brick_id);
+  // A pin on a ready brick (the caller has counted it in entry.pins).
+  PinnedBrick make_pin(uint32_t brick_id, const BrickAccel* accel, bool was_hit);
+  // Under the lock: a build's figures (not a tier load's).
+  void count_build(const BrickAccel& accel, uint64_t bytes, double seconds);
   // Under the lock: takes a ready, unpinned brick out to be built again
   // (the accel into `victims`, its bytes returned, still accounted).
   uint64_t take_for_rebuild(uint32_t brick_id, std::vector<std::unique_ptr<BrickAccel>>& victims);

@@ -36,8 +36,9 @@ WorldRay world_ray(const Ray& ray, double slack, double scene_magnitude) {
   return r;
 }
 
-// Whether the ray may meet the box, widened by the ray's pad, within [t0, t1].
-bool may_enter(const WorldRay& r, const Aabb& box, double t0, double t1) {
+// Clips [t0, t1] to the part of the ray inside the box widened by the ray's
+// pad; false when nothing is left.
+bool clip(const WorldRay& r, const Aabb& box, double& t0, double& t1) {
   for (int a = 0; a < 3; ++a) {
     const double lo = static_cast<double>(box.lo[a]) - r.pad, hi = static_cast<double>(box.hi[a]) + r.pad;
     const double o = r.origin[a], d = r.direction[a];
@@ -52,6 +53,11 @@ bool may_enter(const WorldRay& r, const Aabb& box, double t0, double t1) {
     if (t0 > t1) return false;
   }
   return true;
+}
+
+// Whether the ray may meet the box, widened by the ray's pad, within [t0, t1].
+bool may_enter(const WorldRay& r, const Aabb& box, double t0, double t1) {
+  return clip(r, box, t0, t1);
 }
 
 // Calls visit(instance index) for every instance whose widened world box the
@@ -90,22 +96,9 @@ void walk_bkd(const DynamicSnapshot& s, const WorldRay& r, double tnear, const L
     uint32_t node;
     double t0, t1;
   };
-  // Clipped to the whole tree's box first (may_enter's slab test, kept).
+  // Clipped to the whole tree's box first.
   double t0 = tnear, t1 = limit();
-  for (int a = 0; a < 3 && t0 <= t1; ++a) {
-    const double lo = static_cast<double>(s.bkd.bounds().lo[a]) - r.pad;
-    const double hi = static_cast<double>(s.bkd.bounds().hi[a]) + r.pad;
-    const double o = r.origin[a], d = r.direction[a];
-    if (d == 0.0) {
-      if (o < lo || o > hi) return;
-      continue;
-    }
-    double near = (lo - o) / d, far = (hi - o) / d;
-    if (near > far) std::swap(near, far);
-    t0 = std::max(t0, near);
-    t1 = std::min(t1, far);
-  }
-  if (t0 > t1) return;
+  if (!clip(r, s.bkd.bounds(), t0, t1)) return;
   std::array<Entry, BkdTree::kMaxDepth + 2> stack;
   std::size_t depth = 0;
   stack[depth++] = {0, t0, t1};
