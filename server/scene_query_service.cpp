@@ -305,6 +305,18 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStat
       (*response->mutable_brick_builds_by_structure())[structures[s]] = cache.builds_by_structure[s];
   }
   response->set_evictions(cache.evictions);
+  {
+    const std::shared_ptr<const DynamicSnapshot> dynamic = engine_.dynamic().latest();
+    const DynamicScene::Counters d = engine_.dynamic().counters();
+    response->set_dynamic_version(dynamic->version);
+    response->set_dynamic_meshes(dynamic->meshes.size());
+    response->set_dynamic_instances(dynamic->instances.size());
+    response->set_dynamic_triangles(dynamic->triangle_count());
+    response->set_dynamic_mesh_refits(d.mesh_refits);
+    response->set_dynamic_mesh_rebuilds(d.mesh_rebuilds);
+    response->set_dynamic_top_refits(d.top_refits);
+    response->set_dynamic_top_rebuilds(d.top_rebuilds);
+  }
   response->set_bytes_built(cache.bytes_built);
   response->set_build_seconds(cache.build_seconds);
   response->set_resident_bytes(cache.resident_bytes);

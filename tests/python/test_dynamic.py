@@ -89,6 +89,11 @@ def test_instances_are_hit_with_their_ids_and_move_with_each_version(dynamic_ser
         assert np.allclose(deformed["t_hit"][:64][inner], 13.25, rtol=1e-6, atol=0)
         assert v_deformed == v_moved + 1
 
+        stats = client.stats()
+        assert stats["dynamic_version"] == v_deformed and stats["dynamic_meshes"] == 1
+        assert stats["dynamic_instances"] == 2 and stats["dynamic_triangles"] == 24
+        assert stats["dynamic_mesh_refits"] + stats["dynamic_mesh_rebuilds"] == 1
+        assert stats["dynamic_top_refits"] + stats["dynamic_top_rebuilds"] >= 3
         v_removed = client.remove(a)
         gone = client.cast_rays(rays)
         assert v_removed == v_deformed + 1
