@@ -11,7 +11,8 @@ kind=${1:-release}
 jobs=$(nproc)
 case "$kind" in
   release) dir=build; flags=(-DCMAKE_BUILD_TYPE="${OUTCORE_RELEASE_BUILD_TYPE:-RelWithDebInfo}" -DOUTCORE_WERROR=ON) ;;
-  asan) dir=build-asan; flags=(-DCMAKE_BUILD_TYPE=Debug -DOUTCORE_SANITIZE=ON -DOUTCORE_WERROR=ON) ;;
+  # -g1: line tables, all a sanitizer report needs, at a fraction of -g's build time.
+  asan) dir=build-asan; flags=(-DCMAKE_BUILD_TYPE=Debug -DCMAKE_CXX_FLAGS_DEBUG=-g1 -DOUTCORE_SANITIZE=ON -DOUTCORE_WERROR=ON) ;;
   *) echo "usage: $0 [release|asan]" >&2; exit 2 ;;
 esac
 dir=${OUTCORE_BUILD_DIR:-$dir}
