@@ -284,7 +284,7 @@ TEST_F(DynamicSceneTest, AScramblingMotionTriggersARebuild) {
 TEST_F(DynamicSceneTest, ClosedMeshesMovedAndDeformedDoNotLeakAtVerticesAndEdges) {
   DynamicScene scene;
   const uint32_t mesh = scene.add_mesh(sphere_.vertices, sphere_.triangles)->id;
-  const std::vector<Vec3d> centres = {{0, 0, 0}, {1e3, -2e3, 5e2}, {-7.5, 3.25, 1e4}};
+  const std::vector<Vec3d> centres = {{0, 0, 0}, {1e3, -2e3, 5e2}, {-7.5, 3.25, 1e4}, {1e6, -1e6, 3e5}};
   std::vector<uint32_t> ids;
   for (std::size_t k = 0; k < centres.size(); ++k)
     ids.push_back(scene.add_instance(mesh, placement(0.7 * k, 1.5, centres[k], 0.2))->id);
@@ -292,8 +292,9 @@ TEST_F(DynamicSceneTest, ClosedMeshesMovedAndDeformedDoNotLeakAtVerticesAndEdges
   for (std::size_t v = 0; v < squashed.size(); v += 3) squashed[v] *= 1.7f;
   ASSERT_TRUE(scene.update_vertices(mesh, squashed).ok());
   const auto s = scene.latest();
-  // From inside each instance, rays aimed exactly at every world vertex and
-  // edge midpoint of it: each must hit that instance (no leak).
+  // From inside each instance, and from outside towards its centre, rays
+  // aimed exactly at every world vertex and edge midpoint of it: each must
+  // hit that instance (no leak).
   std::size_t leaks = 0, rays_cast = 0;
   for (const DynamicInstance& instance : s->instances) {
     const auto v = s->meshes[mesh]->vertices();
@@ -303,9 +304,14 @@ TEST_F(DynamicSceneTest, ClosedMeshesMovedAndDeformedDoNotLeakAtVerticesAndEdges
       for (int k = 0; k < 3; ++k) {
         const Vec3d a(v[tri[k]]), b(v[tri[(k + 1) % 3]]);
         for (const Vec3d& target : {a, (a + b) * 0.5}) {
+          const Vec3f world(instance.to_world.point(target));
           Ray r;
           r.origin = centre;
-          r.direction = Vec3f(instance.to_world.point(target)) - centre;
+          r.direction = world - centre;
+          rays.push_back(r);
+          // And from outside, inward through the same point.
+          r.origin = centre + (world - centre) * 8.0f;
+          r.direction = centre - r.origin;
           rays.push_back(r);
         }
       }
