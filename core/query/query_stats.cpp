@@ -63,9 +63,18 @@ std::string QueryStats::to_text() const {
       cache_budget_bytes / 1048576.0, seconds_build, seconds_brick);
   std::string text = buf;
   if (rays_in_brick_set > 0) {
-    std::snprintf(buf, sizeof buf,
-                  "  one Embree scene over all bricks: %llu rays (brick visits not counted)\n",
-                  static_cast<unsigned long long>(rays_in_brick_set));
+    std::snprintf(
+        buf, sizeof buf,
+        "  one structure over all resident bricks (resident set): %llu rays (brick visits not counted)\n",
+        static_cast<unsigned long long>(rays_in_brick_set));
+    text += buf;
+  }
+  if (dynamic_instances > 0) {
+    std::snprintf(
+        buf, sizeof buf,
+        "  dynamic layer: version %llu, %llu instances, %llu rays hit only dynamic geometry, %.3f s\n",
+        static_cast<unsigned long long>(dynamic_version), static_cast<unsigned long long>(dynamic_instances),
+        static_cast<unsigned long long>(rays_hit_only_dynamic), seconds_dynamic);
     text += buf;
   }
   if (proxy_bytes > 0) {

@@ -355,7 +355,10 @@ class SceneClient:
         subtree_loads_checked, subtree_loads_kept, subtree_writes, subtree_rejects, subtree_bytes_read,
         subtree_bytes_written, subtree_load_seconds, subtree_files,
         subtree_file_bytes, subtree_write_failures, subtree_writes_too_large,
-        subtree_files_evicted, subtree_write_seconds; all 0 without a tier)."""
+        subtree_files_evicted, subtree_write_seconds; all 0 without a tier);
+        the dynamic layer's (dynamic_version, dynamic_meshes,
+        dynamic_instances, dynamic_triangles, dynamic_mesh_refits,
+        dynamic_mesh_rebuilds, dynamic_top_refits, dynamic_top_rebuilds)."""
         return _message_to_dict(self._call_plain(self._get_stats, pb.GetStatsRequest(), "GetStats"))
 
     # -- dynamic geometry -------------------------------------------------
