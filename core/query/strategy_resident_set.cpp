@@ -3,6 +3,7 @@
 // brick structure; chunks of consecutive rays go through it as they would
 // through one brick. No upper walk, so no per-brick statistics.
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
@@ -53,8 +54,21 @@ Status run_resident_set(StrategyContext<kKind>& ctx) {
   const uint32_t brick_count = ctx.brick_count();
   std::vector<PinnedBrick> pins(brick_count);
   std::vector<const BrickAccel*> accels(brick_count);
+  // In parallel: every brick is resident, but one may be rebuilt as a better
+  // structure on acquisition (--brick-accel auto).
+  std::vector<PinningTask> tasks(brick_count);
+  const auto t_pin = Clock::now();
+  tbb::parallel_for(uint32_t{0}, brick_count, [&](uint32_t b) {
+    // Isolated: a build's own parallel loops must not pick up another
+    // brick's acquisition, which could wait on a build suspended below it.
+    tbb::this_task_arena::isolate([&] {
+      if (auto pin = pin_for(ctx.cache, b, 0, tasks[b])) pins[b] = std::move(*pin);
+    });
+  });
+  stats.seconds_build += seconds_since(t_pin);
   for (uint32_t b = 0; b < brick_count; ++b) {
-    OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx.cache, b, 0, pins[b], ctx.tally));
+    OUTCORE_RETURN_IF_ERROR(tasks[b].status);
+    merge_task(tasks[b], ctx.tally);
     accels[b] = &pins[b].accel();
   }
   const auto t_set = Clock::now();

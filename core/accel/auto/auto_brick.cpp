@@ -151,9 +151,10 @@ bool AutoBrickBuilder::worth_rebuilding(const BrickAccel& accel, const BuildDema
   if (built == nullptr || demand.rays_expected == 0) return false;
   const StructureChoice best = choose(built->features(), demand.rays_expected);
   if (best.candidate == built->candidate()) return false;
-  const double keep = static_cast<double>(demand.rays_expected) *
-                      costs_[built->candidate()].trace_seconds_per_ray(built->features());
-  return best.predicted_seconds[best.candidate] * kRebuildMargin < keep;
+  const double rays = static_cast<double>(demand.rays_expected);
+  const double saved_per_ray = costs_[built->candidate()].trace_seconds_per_ray(built->features()) -
+                               costs_[best.candidate].trace_seconds_per_ray(built->features());
+  return rays * saved_per_ray > kRebuildMargin * costs_[best.candidate].build_seconds(built->features());
 }
 
 std::string_view AutoBrickBuilder::structure_of(const BrickAccel& accel) const {

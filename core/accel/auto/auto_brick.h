@@ -95,9 +95,12 @@ class AutoBrickBuilder final : public BrickBuilder {
   const CostProfile& profile() const { return profile_; }
   const BrickBuilder& candidate_builder(uint32_t candidate) const { return *builders_[candidate]; }
 
-  // A rebuild must save at least this factor of the predicted cost of
-  // keeping the brick as it is (so that choices do not flap on noise).
-  static constexpr double kRebuildMargin = 1.5;
+  // Rebuilding as the best candidate pays once the trace time the brick's
+  // rays would have saved with it (rays_expected x the difference per ray)
+  // exceeds this factor of its build (ski rental: within about twice the
+  // best of building it first or never; the factor keeps choices from
+  // flapping on noise).
+  static constexpr double kRebuildMargin = 1.25;
 
  private:
   AutoBrickBuilder() = default;
