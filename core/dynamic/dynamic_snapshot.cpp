@@ -258,15 +258,14 @@ uint64_t DynamicSnapshot::memory_bytes() const {
 }
 
 namespace {
+
 std::vector<Aabb> world_boxes(const DynamicSnapshot& s) {
   std::vector<Aabb> boxes(s.instances.size());
   for (std::size_t i = 0; i < boxes.size(); ++i) boxes[i] = s.instances[i].world_box;
   return boxes;
 }
-}  // namespace
 
-void build_dynamic_top_level(DynamicSnapshot& snapshot) {
-  const std::vector<Aabb> boxes = world_boxes(snapshot);
+void build_top_level_over(DynamicSnapshot& snapshot, std::span<const Aabb> boxes) {
   if (snapshot.top_kind == DynamicTopLevel::kBkd) {
     snapshot.top.clear();
     snapshot.bkd = BkdTree::build(boxes);
@@ -276,6 +275,12 @@ void build_dynamic_top_level(DynamicSnapshot& snapshot) {
     snapshot.top = build_wide_top_level(boxes);
     snapshot.top_built_cost = wide_bvh_sah_cost(snapshot.top);
   }
+}
+
+}  // namespace
+
+void build_dynamic_top_level(DynamicSnapshot& snapshot) {
+  build_top_level_over(snapshot, world_boxes(snapshot));
 }
 
 bool refit_dynamic_top_level(DynamicSnapshot& snapshot) {
@@ -289,7 +294,7 @@ bool refit_dynamic_top_level(DynamicSnapshot& snapshot) {
     cost = wide_bvh_sah_cost(snapshot.top);
   }
   if (cost <= kTopLevelRebuildRatio * snapshot.top_built_cost) return false;
-  build_dynamic_top_level(snapshot);
+  build_top_level_over(snapshot, boxes);
   return true;
 }
 

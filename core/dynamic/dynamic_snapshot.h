@@ -44,13 +44,12 @@ struct DynamicInstance {
 // The structure over the instances: an 8-wide BVH (the default) or the
 // seed's B-KD tree (bkd_tree.h); both refitted on updates, rebuilt past
 // kTopLevelRebuildRatio x their cost when built. Answers are the same.
-enum class DynamicTopLevel : uint8_t;
+enum class DynamicTopLevel : uint8_t { kBvh, kBkd };
 // Lower than a mesh's 1.5: a top level builds in about the time of a
 // transform update (10,000 instances: ~2.5 ms), and a refitted one over
 // instances that wander loses speed faster than a deforming mesh does
 // (docs/BENCHMARKS.md, "Dynamic geometry").
 inline constexpr double kTopLevelRebuildRatio = 1.1;
-enum class DynamicTopLevel : uint8_t { kBvh, kBkd };
 
 struct DynamicSnapshot {
   uint64_t version = 0;

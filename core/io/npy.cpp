@@ -93,15 +93,6 @@ Status write_file(const std::string& path, const std::string& header, const void
   return write_file_atomically(path, parts);
 }
 
-Expected<std::string> read_whole_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return io_error_from_errno("cannot open " + path);
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  if (in.bad()) return io_error_from_errno("cannot read " + path);
-  return std::move(buffer).str();
-}
-
 // Checks shape, dtype and size; returns the data bytes.
 Expected<std::string_view> array_data(std::string_view bytes, const std::string& name,
                                       const NpyHeader& header, uint64_t record_bytes) {
@@ -125,6 +116,15 @@ Expected<std::string_view> array_data(std::string_view bytes, const std::string&
 }
 
 }  // namespace
+
+Expected<std::string> read_whole_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return io_error_from_errno("cannot open " + path);
+  std::ostringstream buffer;
+  buffer << in.rdbuf();
+  if (in.bad()) return io_error_from_errno("cannot read " + path);
+  return std::move(buffer).str();
+}
 
 Expected<NpyHeader> parse_npy_header(std::string_view bytes, const std::string& name) {
   if (bytes.size() < kMagicBytes || std::memcmp(bytes.data(), kMagic, kMagicBytes) != 0) {

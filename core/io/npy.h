@@ -41,6 +41,9 @@ struct NpyNumbers {
 Expected<NpyNumbers> decode_numeric_npy(std::string_view bytes, const std::string& name);
 std::string npy_shape_text(const std::vector<uint64_t>& shape);
 
+// A whole file's bytes (IO_ERROR naming it when it cannot be read).
+Expected<std::string> read_whole_file(const std::string& path);
+
 // Reads rays; (N,6) rows get tnear = 0, tfar = inf.
 Expected<std::vector<Ray>> read_rays_npy(const std::string& path);
 // Decodes rays from an in-memory .npy image (same checks as the file form).

@@ -3,9 +3,9 @@
 #include <zlib.h>
 
 #include <cstdint>
-#include <fstream>
 #include <limits>
-#include <sstream>
+
+#include "core/io/npy.h"
 
 namespace outcore {
 namespace {
@@ -173,12 +173,7 @@ Expected<std::map<std::string, std::string>> decode_npz(std::string_view b, cons
 }
 
 Expected<std::map<std::string, std::string>> read_npz(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return io_error_from_errno("cannot open " + path);
-  std::ostringstream buffer;
-  buffer << in.rdbuf();
-  if (in.bad()) return io_error_from_errno("cannot read " + path);
-  const std::string bytes = std::move(buffer).str();
+  OUTCORE_ASSIGN_OR_RETURN(const std::string bytes, read_whole_file(path));
   return decode_npz(bytes, path);
 }
 
