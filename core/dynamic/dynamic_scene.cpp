@@ -120,14 +120,17 @@ Expected<uint64_t> DynamicScene::update_transforms(std::span<const uint32_t> geo
   std::unordered_set<uint32_t> seen;
   for (std::size_t k = 0; k < geometry_ids.size(); ++k) {
     const uint32_t id = geometry_ids[k];
-    const std::string what =
-        "update_transforms (entry " + std::to_string(k) + ", geometry " + std::to_string(id) + ")";
-    const DynamicInstance* found = next->find(id);
-    if (found == nullptr) return not_found(what + ": no such dynamic instance");
-    if (!seen.insert(id).second) return invalid_argument(what + ": the id appears twice");
-    auto& instance = const_cast<DynamicInstance&>(*found);  // next is ours until published
-    OUTCORE_ASSIGN_OR_RETURN(instance, place(id, instance.mesh_id, *next->meshes[instance.mesh_id],
-                                             transforms.subspan(12 * k, 12), what));
+    // Named only on an error: an update may carry tens of thousands of entries.
+    const auto entry = [&] {
+      return "update_transforms (entry " + std::to_string(k) + ", geometry " + std::to_string(id) + ")";
+    };
+    DynamicInstance* found = next->find(id);
+    if (found == nullptr) return not_found(entry() + ": no such dynamic instance");
+    if (!seen.insert(id).second) return invalid_argument(entry() + ": the id appears twice");
+    auto placed =
+        place(id, found->mesh_id, *next->meshes[found->mesh_id], transforms.subspan(12 * k, 12), "transform");
+    if (!placed.ok()) return placed.status().with_context(entry());
+    *found = *placed;
   }
   if (refit_dynamic_top_level(*next)) {
     ++counters_.top_rebuilds;

@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "core/accel/bvh/wide_bvh.h"
@@ -71,6 +72,10 @@ struct DynamicSnapshot {
 
   // The instance with this geometry id, or nullptr.
   const DynamicInstance* find(uint32_t geometry_id) const;
+  // The same in a snapshot being made (DynamicScene, before publishing).
+  DynamicInstance* find(uint32_t geometry_id) {
+    return const_cast<DynamicInstance*>(std::as_const(*this).find(geometry_id));
+  }
   uint64_t triangle_count() const;  // over live instances
   uint64_t memory_bytes() const;    // meshes counted once
 };
