@@ -145,6 +145,8 @@ template Expected<std::span<const Ray>> SceneQueryService::check_request<QueryKi
     const v1::QueryRequest&, const BatchPosition&, std::vector<Ray>&) const;
 template Expected<std::span<const Ray>> SceneQueryService::check_request<QueryKind::kAnyHit>(
     const v1::QueryRequest&, const BatchPosition&, std::vector<Ray>&) const;
+template Expected<std::span<const Ray>> SceneQueryService::check_request<QueryKind::kAllHits>(
+    const v1::QueryRequest&, const BatchPosition&, std::vector<Ray>&) const;
 
 bool SceneQueryService::worth_keeping(const CallBuffers& buffers) {
   return buffers.rays.capacity() * sizeof(Ray) + buffers.answers.capacity() <= kKeepSharedBufferBytes;

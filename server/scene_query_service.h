@@ -120,6 +120,13 @@ class SceneQueryService final : public SceneQueryBase {
                               v1::DynamicVersion* response) override;
   grpc::Status Remove(grpc::ServerContext* context, const v1::RemoveRequest* request,
                       v1::DynamicVersion* response) override;
+  // Every hit and point queries (every_hit_and_point_calls.cpp).
+  grpc::Status CountIntersections(grpc::ServerContext* context, const v1::QueryRequest* request,
+                                  v1::CountResponse* response) override;
+  grpc::Status ListIntersections(grpc::ServerContext* context, const v1::QueryRequest* request,
+                                 v1::ListResponse* response) override;
+  grpc::Status QueryPoints(grpc::ServerContext* context, const v1::PointRequest* request,
+                           v1::PointResponse* response) override;
 
   ServiceCounters counters() const;
 
@@ -156,6 +163,10 @@ class SceneQueryService final : public SceneQueryBase {
   // The dynamic layer's version a call traces: the one the request names,
   // or the latest; held for all of the call's parts.
   Expected<std::shared_ptr<const DynamicSnapshot>> dynamic_for(const v1::QueryRequest& request) const;
+  // Every hit of a request's rays: counts, and the sorted records when
+  // `records` is given; checks the request as check_request does.
+  Status every_hit(const v1::QueryRequest& request, std::vector<uint32_t>& counts,
+                   std::vector<RayHitRecord>* records, QueryStats& stats);
   template <QueryKind kKind, class Response>
   grpc::Status answer(grpc::ServerContext* context, const v1::QueryRequest& request, Response* response);
   // answer() for a request with a shared payload (shared_payload.h).

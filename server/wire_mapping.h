@@ -41,6 +41,15 @@ struct KindTraits<QueryKind::kAnyHit> {
   static std::string* payload(v1::OccludedResponse* response) { return response->mutable_occluded(); }
 };
 
+template <>
+struct KindTraits<QueryKind::kAllHits> {
+  using Response = v1::CountResponse;
+  static constexpr uint64_t kReplyBytesPerRay = sizeof(uint32_t);  // the counts; a list's hits come on top
+  static constexpr const char* kUnary = "CountIntersections";
+  static constexpr const char* kStream = "CountIntersections";
+  static std::string* payload(v1::CountResponse* response) { return response->mutable_counts(); }
+};
+
 // "request", or "chunk N" of a stream: how errors name a batch.
 std::string where(const BatchPosition& position);
 

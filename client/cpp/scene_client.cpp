@@ -234,6 +234,100 @@ Status SceneClient::occluded(std::span<const Ray> rays, std::span<uint8_t> occlu
   return run<v1::OccludedResponse>(rays, occluded, 1, options, stats);
 }
 
+Status SceneClient::every_hit_chunk(std::span<const Ray> rays, bool listing, std::vector<uint32_t>& counts,
+                                   std::vector<Hit>* hits, const CallOptions& options, CallStats* stats) {
+  v1::QueryRequest request;
+  fill_request(rays, 0, options, request);
+  grpc::ClientContext context;
+  set_deadline(context, options.deadline_seconds);
+  const char* method = listing ? "ListIntersections" : "CountIntersections";
+  v1::ListResponse list;
+  v1::CountResponse count;
+  const grpc::Status status = listing ? stub_->ListIntersections(&context, request, &list)
+                                      : stub_->CountIntersections(&context, request, &count);
+  if (!status.ok()) return from_grpc_status(status, std::string(method) + " on " + address_);
+  const std::string& bytes = listing ? list.counts() : count.counts();
+  if (bytes.size() != rays.size() * 4)
+    return internal_error(std::string("the server's reply to ") + method + " holds " +
+                          std::to_string(bytes.size()) + " count bytes for " + std::to_string(rays.size()) +
+                          " rays");
+  const std::size_t before = counts.size();
+  counts.resize(before + rays.size());
+  std::memcpy(counts.data() + before, bytes.data(), bytes.size());
+  add_stats(listing ? list.stats() : count.stats(), stats);
+  if (!listing) return Status::Ok();
+  uint64_t total = 0;
+  for (std::size_t i = before; i < counts.size(); ++i) total += counts[i];
+  if (list.hit_count() != total || list.hits().size() != total * sizeof(Hit))
+    return internal_error("the server's reply to ListIntersections holds " + std::to_string(list.hits().size()) +
+                          " hit bytes, its counts say " + std::to_string(total) + " hits");
+  const std::size_t at = hits->size();
+  hits->resize(at + total);
+  if (total > 0) std::memcpy(static_cast<void*>(hits->data() + at), list.hits().data(), list.hits().size());
+  return Status::Ok();
+}
+
+Status SceneClient::count_intersections(std::span<const Ray> rays, std::span<uint32_t> counts,
+                                        const CallOptions& options, CallStats* stats) {
+  if (counts.size() != rays.size()) return invalid_argument("counts and rays differ in length");
+  std::vector<uint32_t> all;
+  for (std::size_t from = 0; from < rays.size(); from += max_chunk_rays_) {
+    const auto chunk = rays.subspan(from, std::min<std::size_t>(max_chunk_rays_, rays.size() - from));
+    OUTCORE_RETURN_IF_ERROR(every_hit_chunk(chunk, false, all, nullptr, options, stats));
+  }
+  std::copy(all.begin(), all.end(), counts.begin());
+  return Status::Ok();
+}
+
+Status SceneClient::list_intersections(std::span<const Ray> rays, std::span<uint32_t> counts,
+                                       std::vector<Hit>& hits, const CallOptions& options, CallStats* stats) {
+  if (counts.size() != rays.size()) return invalid_argument("counts and rays differ in length");
+  std::vector<uint32_t> all;
+  hits.clear();
+  std::size_t chunk_rays = max_chunk_rays_;
+  for (std::size_t from = 0; from < rays.size();) {
+    const auto chunk = rays.subspan(from, std::min<std::size_t>(chunk_rays, rays.size() - from));
+    const Status status = every_hit_chunk(chunk, true, all, &hits, options, stats);
+    // A chunk whose hits would not fit a message is sent again in quarters.
+    if (status.code() == StatusCode::kResourceExhausted && chunk_rays > 1) {
+      chunk_rays = std::max<std::size_t>(1, chunk_rays / 4);
+      continue;
+    }
+    OUTCORE_RETURN_IF_ERROR(status);
+    from += chunk.size();
+  }
+  std::copy(all.begin(), all.end(), counts.begin());
+  return Status::Ok();
+}
+
+Status SceneClient::query_points(std::span<const Vec3f> points, v1::PointQueryKind kind, std::string& answers,
+                                 const CallOptions& options, CallStats* stats) {
+  answers.clear();
+  // A point's request (12 bytes) and answer (at most 44) fit where a ray's
+  // request (32) and hit (32) do.
+  const std::size_t chunk_points = std::max<std::size_t>(1, max_chunk_rays_ * 32 / 44);
+  for (std::size_t from = 0; from < points.size(); from += chunk_points) {
+    const auto chunk = points.subspan(from, std::min(chunk_points, points.size() - from));
+    v1::PointRequest request;
+    request.set_layout_version(1);
+    request.set_kind(kind);
+    request.set_point_count(chunk.size());
+    request.set_points(reinterpret_cast<const char*>(chunk.data()), chunk.size_bytes());
+    request.set_strict(options.strict);
+    grpc::ClientContext context;
+    set_deadline(context, options.deadline_seconds);
+    v1::PointResponse response;
+    const grpc::Status status = stub_->QueryPoints(&context, request, &response);
+    if (!status.ok()) return from_grpc_status(status, "QueryPoints on " + address_);
+    if (response.point_count() != chunk.size())
+      return internal_error("the server answered " + std::to_string(response.point_count()) + " points of " +
+                            std::to_string(chunk.size()));
+    answers += response.answers();
+    add_stats(response.stats(), stats);
+  }
+  return Status::Ok();
+}
+
 namespace {
 
 // A numeric loopback address, or the name localhost (any case, with or

@@ -90,6 +90,20 @@ class SceneClient {
   Status occluded(std::span<const Ray> rays, std::span<uint8_t> occluded, const CallOptions& options = {},
                   CallStats* stats = nullptr);
 
+  // Every hit of each ray (CountIntersections / ListIntersections, in
+  // chunks of max_chunk_rays(); a list's chunk is cut smaller when its hits
+  // would not fit a message): counts[i] hits on ray i, and with `hits` every
+  // hit, ray by ray, each ray's by t then ids. counts.size() must equal
+  // rays.size().
+  Status count_intersections(std::span<const Ray> rays, std::span<uint32_t> counts,
+                             const CallOptions& options = {}, CallStats* stats = nullptr);
+  Status list_intersections(std::span<const Ray> rays, std::span<uint32_t> counts, std::vector<Hit>& hits,
+                            const CallOptions& options = {}, CallStats* stats = nullptr);
+  // Point queries (QueryPoints): `answers` gets the proto's bytes for `kind`
+  // (44, 4, 4 or 1 per point), in chunks of what a message holds.
+  Status query_points(std::span<const Vec3f> points, v1::PointQueryKind kind, std::string& answers,
+                      const CallOptions& options = {}, CallStats* stats = nullptr);
+
   Expected<v1::SceneInfo> scene_info(double deadline_seconds = 0);
   Expected<v1::ServerStats> stats(double deadline_seconds = 0);
 
@@ -100,6 +114,9 @@ class SceneClient {
 
  private:
   SceneClient(std::shared_ptr<grpc::Channel> channel, std::string address);
+  // One chunk of an every-hit call: appends its counts and hits.
+  Status every_hit_chunk(std::span<const Ray> rays, bool listing, std::vector<uint32_t>& counts,
+                         std::vector<Hit>* hits, const CallOptions& options, CallStats* stats);
   template <class Response>
   Status run(std::span<const Ray> rays, std::span<uint8_t> out, uint32_t out_bytes_per_ray,
              const CallOptions& options, CallStats* stats);

@@ -3,13 +3,15 @@
 // all the rays queued there, so the virtual call is per brick, never per ray;
 // each implementation runs its own tight, non-virtual loop over the rays.
 //
-// Thread-safety: after construction an accel is immutable; intersect() and
-// occluded() may run concurrently from many threads on disjoint ray subsets.
+// Thread-safety: after construction an accel is immutable; its queries
+// may run concurrently from many threads on disjoint ray subsets.
 #pragma once
 
 #include <cstdint>
 #include <span>
+#include <vector>
 
+#include "core/accel/brick_queries.h"
 #include "core/ray/query_types.h"
 #include "core/ray/ray_types.h"
 
@@ -25,6 +27,15 @@ class BrickAccel {
   virtual void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const = 0;
   // Any hit: sets occluded[i] = 1 for each ray that hits something in this brick.
   virtual void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const = 0;
+  // Every hit (count and list queries): appends (i, hit) to `out` for each
+  // triangle of this brick that rays[i] hits with tnear < t <= tfar, once
+  // per triangle, for each i in ray_ids (brick_queries.h).
+  virtual void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                        std::vector<RayHitRecord>& out) const = 0;
+  // Closest point: for each i in point_ids, replaces best[i] when a triangle
+  // of this brick is nearer to points[i] (closest_is_better).
+  virtual void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                              ClosestPoint* best) const = 0;
 
   // Every byte this brick holds: geometry, index and id buffers, and the
   // acceleration structure (Embree's own allocations, via its memory monitor).

@@ -1,5 +1,7 @@
 #include "core/accel/embree_brick.h"
 
+#include "core/accel/bvh/watertight_triangle_test.h"
+
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -483,6 +485,17 @@ Expected<std::unique_ptr<BrickAccel>> EmbreeBrickBuilder::build(BrickData&& bric
 const std::string& EmbreeBrickBuilder::name() const {
   static const std::string kName = "embree";
   return kName;
+}
+
+void EmbreeBrickAccel::all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                                std::vector<RayHitRecord>& out) const {
+  all_hits_by_scan<WatertightTriangleTest>({triangles_.data(), hit_records_.size()}, hit_records_, ray_ids, rays,
+                                           out);
+}
+
+void EmbreeBrickAccel::closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                                      ClosestPoint* best) const {
+  closest_points_by_scan({triangles_.data(), hit_records_.size()}, hit_records_, point_ids, points, best);
 }
 
 }  // namespace outcore

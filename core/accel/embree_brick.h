@@ -129,6 +129,11 @@ class EmbreeBrickAccel final : public BrickAccel {
 
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
+  // Every hit and closest points scan the brick's triangles with the
+  // watertight test (brick_queries.h): exact, where Embree's own test may
+  // report a triangle twice (spatial splits) or lose an edge.
+  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out) const override;
+  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points, ClosestPoint* best) const override;
 
   uint64_t memory_bytes() const override;
   double build_seconds() const override { return build_seconds_; }
@@ -183,12 +188,7 @@ class EmbreeBrickAccel final : public BrickAccel {
   std::vector<Triangle> triangles_;  // Embree's vertex buffer; capacity > size
   // Per triangle k: its unit normal (float64 computation rounded to float;
   // zero for a degenerate triangle, never hit) and the user's ids.
-  struct HitRecord {
-    Vec3f normal;
-    uint32_t geometry_id;
-    uint32_t primitive_id;
-  };
-  static_assert(sizeof(HitRecord) == 20);
+  using HitRecord = BvhHitRecord;
   std::vector<HitRecord> hit_records_;
   std::vector<uint32_t> indices_;  // Embree's index buffer; capacity > size
   bool prim_is_triangle_ = true;   // no degenerate left out: primID == k

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "core/accel/brick_build_input.h"
+#include "core/accel/triangle_hit_records.h"
 #include "core/accel/bvh/double_triangle_test.h"
 #include "core/ray/query_types.h"
 
@@ -21,20 +22,15 @@ Expected<std::unique_ptr<ReferenceBrickAccel>> ReferenceBrickAccel::build(BrickD
   std::unique_ptr<ReferenceBrickAccel> accel(new ReferenceBrickAccel());
   accel->triangle_count_ = static_cast<uint32_t>(n);
   keep_usable_triangles(brick);
-  accel->normals_.reserve(brick.triangles.size());
-  for (const Triangle& tri : brick.triangles) {
-    const Vec3d v0(tri.v0), v1(tri.v1), v2(tri.v2);
-    accel->normals_.push_back(Vec3f(normalize(cross(v1 - v0, v2 - v0))));
-  }
+  accel->records_ = hit_records_for(brick.triangles, brick.ids);
   accel->triangles_ = std::move(brick.triangles);
-  accel->ids_ = std::move(brick.ids);
   accel->build_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return accel;
 }
 
 uint64_t ReferenceBrickAccel::memory_bytes() const {
-  return kOverheadBytes + triangles_.capacity() * sizeof(Triangle) + ids_.capacity() * sizeof(TriangleId) +
-         normals_.capacity() * sizeof(Vec3f);
+  return kOverheadBytes + triangles_.capacity() * sizeof(Triangle) +
+         records_.capacity() * sizeof(BvhHitRecord);
 }
 
 void ReferenceBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const {
@@ -48,17 +44,17 @@ void ReferenceBrickAccel::intersect(std::span<const uint32_t> ray_ids, const Ray
       const float tfar = ray.tfar < best.t ? ray.tfar : best.t;
       TriangleHit h;
       if (!DoubleTriangleTest::hit(prepared, triangles_[k], ray.tnear, tfar, h)) continue;
-      if (!hit_is_better(h.t, ids_[k].geometry_id, ids_[k].primitive_id, best)) continue;
+      if (!hit_is_better(h.t, records_[k].geometry_id, records_[k].primitive_id, best)) continue;
       best.t = h.t;
-      best.geometry_id = ids_[k].geometry_id;
-      best.primitive_id = ids_[k].primitive_id;
+      best.geometry_id = records_[k].geometry_id;
+      best.primitive_id = records_[k].primitive_id;
       found = k;
       found_hit = h;
     }
     if (found == kInvalidId) continue;
     best.u = found_hit.u;
     best.v = found_hit.v;
-    best.normal = normals_[found];
+    best.normal = records_[found].normal;
   }
 }
 
@@ -75,6 +71,16 @@ void ReferenceBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray*
       }
     }
   }
+}
+
+void ReferenceBrickAccel::all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                                   std::vector<RayHitRecord>& out) const {
+  all_hits_by_scan<DoubleTriangleTest>(triangles_, records_, ray_ids, rays, out);
+}
+
+void ReferenceBrickAccel::closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                                         ClosestPoint* best) const {
+  closest_points_by_scan(triangles_, records_, point_ids, points, best);
 }
 
 Expected<std::unique_ptr<BrickAccel>> ReferenceBrickBuilder::build(BrickData&& brick) const {

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "core/accel/brick_accel_factory.h"
+#include "core/accel/bvh/bvh_tree.h"
 #include "core/store/brick_data.h"
 
 namespace outcore {
@@ -33,11 +34,13 @@ class ReferenceBrickAccel final : public BrickAccel {
   static Expected<std::unique_ptr<ReferenceBrickAccel>> build(BrickData&& brick);
   // Keeps the brick's vectors (their capacity) and a normal per triangle.
   static uint64_t reserve_bytes(uint64_t triangle_count) {
-    return kOverheadBytes + triangle_count * (sizeof(Triangle) + sizeof(TriangleId) + sizeof(Vec3f));
+    return kOverheadBytes + triangle_count * (sizeof(Triangle) + sizeof(BvhHitRecord));
   }
 
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
+  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out) const override;
+  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points, ClosestPoint* best) const override;
   uint64_t memory_bytes() const override;
   double build_seconds() const override { return build_seconds_; }
   uint32_t triangle_count() const override { return triangle_count_; }
@@ -45,8 +48,7 @@ class ReferenceBrickAccel final : public BrickAccel {
  private:
   ReferenceBrickAccel() = default;
   std::vector<Triangle> triangles_;  // the usable ones
-  std::vector<TriangleId> ids_;
-  std::vector<Vec3f> normals_;
+  std::vector<BvhHitRecord> records_;  // records_[k] belongs to triangles_[k]
   uint32_t triangle_count_ = 0;
   double build_seconds_ = 0;
 };

@@ -48,6 +48,8 @@ class CountingAccel final : public BrickAccel {
   CountingAccel(BrickData data, uint64_t bytes) : data_(std::move(data)), bytes_(bytes) {}
   void intersect(std::span<const uint32_t>, const Ray*, Hit*) const override {}
   void occluded(std::span<const uint32_t>, const Ray*, uint8_t*) const override {}
+  void all_hits(std::span<const uint32_t>, const Ray*, std::vector<RayHitRecord>&) const override {}
+  void closest_points(std::span<const uint32_t>, const Vec3f*, ClosestPoint*) const override {}
   uint64_t memory_bytes() const override { return bytes_; }
   double build_seconds() const override { return 0.0; }
   uint32_t triangle_count() const override { return static_cast<uint32_t>(data_.triangles.size()); }

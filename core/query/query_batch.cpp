@@ -44,5 +44,6 @@ Status validate_batch(const QueryBatch<kKind>& batch, bool strict, uint64_t& inv
 
 template Status validate_batch(const QueryBatch<QueryKind::kClosestHit>&, bool, uint64_t&);
 template Status validate_batch(const QueryBatch<QueryKind::kAnyHit>&, bool, uint64_t&);
+template Status validate_batch(const QueryBatch<QueryKind::kAllHits>&, bool, uint64_t&);
 
 }  // namespace outcore

@@ -1,5 +1,5 @@
-// QueryBatch: one batch's rays and answers (closest hits or occlusion flags,
-// by kKind) and its rays' validity flags, with the per-ray operations every
+// QueryBatch: one batch's rays and answers (closest hits, occlusion flags or
+// every hit, by kKind) and its rays' validity flags, with the per-ray operations every
 // strategy shares: reset, check, horizon, finish, trace at a brick.
 //
 // Thread-safety: a view; tasks touch disjoint rays.
@@ -9,7 +9,9 @@
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <mutex>
 #include <span>
+#include <vector>
 
 #include "core/accel/brick_accel.h"
 #include "core/ray/query_types.h"
@@ -18,6 +20,19 @@
 #include "core/util/status.h"
 
 namespace outcore {
+
+// Where an every-hit batch puts its records: each brick visit's chunk is
+// appended at once (one lock per chunk of up to QueryBatch::kTraceChunk rays).
+struct AllHitsCollector {
+  std::mutex mutex;
+  std::vector<RayHitRecord> records;
+
+  void append(const std::vector<RayHitRecord>& found) {
+    if (found.empty()) return;
+    const std::lock_guard lock(mutex);
+    records.insert(records.end(), found.begin(), found.end());
+  }
+};
 
 template <QueryKind kKind>
 struct QueryBatch {
@@ -30,6 +45,9 @@ struct QueryBatch {
   // The rays were validated before any strategy ran (strict mode, or
   // reordering off): `valid` says, nothing is to be reset or counted again.
   bool validated_apart = false;
+  // Every hit: hits per ray, and where the hits go (null: counts only).
+  uint32_t* hit_counts = nullptr;
+  AllHitsCollector* collector = nullptr;
 
   std::size_t size() const { return rays.size(); }
 
@@ -37,13 +55,16 @@ struct QueryBatch {
   void reset_answer(std::size_t i) const {
     if constexpr (kKind == QueryKind::kClosestHit) {
       hits[i] = Hit{};
-    } else {
+    } else if constexpr (kKind == QueryKind::kAnyHit) {
       occluded[i] = 0;
+    } else {
+      hit_counts[i] = 0;
     }
   }
   // 1 when ray i's answer is a hit.
   uint64_t answered_hit(std::size_t i) const {
     if constexpr (kKind == QueryKind::kClosestHit) return hits[i].is_hit();
+    if constexpr (kKind == QueryKind::kAllHits) return hit_counts[i] != 0;
     return occluded[i] != 0;
   }
   // Resets ray i's answer; true when the ray is valid (ray_problem).
@@ -65,7 +86,8 @@ struct QueryBatch {
     if constexpr (kKind == QueryKind::kClosestHit) return std::min(rays[i].tfar, hits[i].t);
     return rays[i].tfar;
   }
-  // Nothing further can change ray i's answer (an occlusion found).
+  // Nothing further can change ray i's answer (an occlusion found; every
+  // hit never finishes early).
   bool finished(std::size_t i) const {
     if constexpr (kKind == QueryKind::kAnyHit) return occluded[i] != 0;
     return false;
@@ -96,11 +118,30 @@ struct QueryBatch {
                          h.primitive_id == primitive[k] && h.geometry_id == geometry[k];
         }
       }
-    } else {
+    } else if constexpr (kKind == QueryKind::kAnyHit) {
       accel.occluded(ids, rays.data(), occluded);
       for (const uint32_t i : ids) without_hit += occluded[i] == 0;
+    } else {
+      without_hit = trace_all_hits(accel, ids);
     }
     return without_hit;
+  }
+
+ private:
+  uint64_t trace_all_hits(const BrickAccel& accel, std::span<const uint32_t> ids) const {
+    uint64_t with_hit = 0;
+    std::vector<RayHitRecord> found;
+    for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
+      found.clear();
+      accel.all_hits(ids.subspan(from, std::min(kTraceChunk, ids.size() - from)), rays.data(), found);
+      // A ray's records are consecutive (structures answer ray by ray).
+      for (std::size_t k = 0; k < found.size(); ++k) {
+        ++hit_counts[found[k].ray];
+        with_hit += k == 0 || found[k].ray != found[k - 1].ray;
+      }
+      if (collector != nullptr) collector->append(found);
+    }
+    return ids.size() - with_hit;
   }
 };
 

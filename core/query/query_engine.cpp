@@ -6,6 +6,7 @@
 #include "core/cache/cache_budget.h"
 #include "core/query/batch_planner.h"
 #include "core/query/batch_scratch.h"
+#include "core/query/point_queries.h"
 #include "core/query/strategy.h"
 #include "core/query/upper_walks.h"
 #include "core/util/cpu_features.h"
@@ -97,24 +98,125 @@ Expected<std::unique_ptr<QueryEngine>> QueryEngine::create(std::shared_ptr<const
 Status QueryEngine::intersect(std::span<const Ray> rays, std::span<Hit> hits, const QueryOptions& options,
                               QueryStats* stats) {
   if (hits.size() != rays.size()) return invalid_argument("hits and rays differ in length");
-  return run<QueryKind::kClosestHit>(rays, hits.data(), nullptr, options, stats);
+  return run<QueryKind::kClosestHit>(rays, {.hits = hits.data()}, options, stats);
 }
 
 Status QueryEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occluded,
                              const QueryOptions& options, QueryStats* stats) {
   if (occluded.size() != rays.size()) return invalid_argument("occlusion flags and rays differ in length");
-  return run<QueryKind::kAnyHit>(rays, nullptr, occluded.data(), options, stats);
+  return run<QueryKind::kAnyHit>(rays, {.occluded = occluded.data()}, options, stats);
+}
+
+Status QueryEngine::all_hits(std::span<const Ray> rays, std::span<uint32_t> counts,
+                             std::vector<RayHitRecord>* records, const QueryOptions& options,
+                             QueryStats* stats) {
+  if (counts.size() != rays.size()) return invalid_argument("hit counts and rays differ in length");
+  AllHitsCollector collector;
+  // Neither the resident set nor trace-ahead keeps every hit.
+  QueryOptions every_hit = options;
+  every_hit.brick_set = false;
+  every_hit.trace_ahead = false;
+  OUTCORE_RETURN_IF_ERROR(run<QueryKind::kAllHits>(
+      rays, {.hit_counts = counts.data(), .collector = records != nullptr ? &collector : nullptr}, every_hit,
+      stats));
+  if (records == nullptr) return Status::Ok();
+  *records = std::move(collector.records);
+  std::sort(records->begin(), records->end(), [](const RayHitRecord& a, const RayHitRecord& b) {
+    if (a.ray != b.ray) return a.ray < b.ray;
+    if (a.hit.t != b.hit.t) return a.hit.t < b.hit.t;
+    if (a.hit.geometry_id != b.hit.geometry_id) return a.hit.geometry_id < b.hit.geometry_id;
+    return a.hit.primitive_id < b.hit.primitive_id;
+  });
+  return Status::Ok();
+}
+
+Status QueryEngine::closest_points(std::span<const Vec3f> points, std::span<ClosestPoint> answers,
+                                   const QueryOptions& options, QueryStats* stats_out) {
+  if (answers.size() != points.size()) return invalid_argument("answers and points differ in length");
+  const std::shared_ptr<const DynamicSnapshot> dynamic = dynamic_.latest();
+  if (!dynamic->instances.empty())
+    return failed_precondition("point queries see the static scene only, and the dynamic layer holds " +
+                               std::to_string(dynamic->instances.size()) + " instance(s) at version " +
+                               std::to_string(dynamic->version));
+  const auto start = Clock::now();
+  const uint64_t ticks_start = ticks();
+  const CacheCounters counters_before = cache_->counters();
+  BatchTally tally;
+  tally.stats.rays = points.size();
+  PointQueryContext ctx{*store_, *cache_, tally, options.strict};
+  OUTCORE_RETURN_IF_ERROR(find_closest_points(ctx, points, answers));
+  cache_->release_evicted_pages();
+  finish_batch_stats(tally, *cache_, counters_before, start, ticks_start, nullptr);
+  if (stats_out != nullptr) *stats_out = tally.stats;
+  return Status::Ok();
+}
+
+Status QueryEngine::occupancy(std::span<const Vec3f> points, std::span<uint8_t> inside,
+                              const QueryOptions& options, QueryStats* stats_out) {
+  if (inside.size() != points.size()) return invalid_argument("occupancy flags and points differ in length");
+  QueryStats total;
+  std::vector<uint32_t> pending;  // points whose rays so far met an edge
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    inside[i] = 0;
+    if (const char* problem = point_problem(points[i])) {
+      if (options.strict) return invalid_argument("point " + std::to_string(i) + ": " + problem);
+      ++total.invalid_rays;
+      continue;
+    }
+    pending.push_back(static_cast<uint32_t>(i));
+  }
+  total.rays = points.size();
+  std::vector<uint8_t> odd_votes(points.size(), 0);
+  std::vector<Ray> rays;
+  std::vector<uint32_t> counts;
+  std::vector<RayHitRecord> records;
+  for (int round = 0; round < kOccupancyDirections && !pending.empty(); ++round) {
+    const Vec3f direction = occupancy_direction(round);
+    rays.assign(pending.size(), Ray{});
+    for (std::size_t k = 0; k < pending.size(); ++k) rays[k] = {points[pending[k]], direction, 0.0f};
+    counts.assign(pending.size(), 0);
+    QueryStats round_stats;
+    OUTCORE_RETURN_IF_ERROR(all_hits(rays, counts, &records, options, &round_stats));
+    total.add(round_stats);
+    std::vector<uint32_t> undecided;
+    std::size_t at = 0;
+    for (std::size_t k = 0; k < pending.size(); ++k) {
+      const std::size_t begin = at;
+      while (at < records.size() && records[at].ray == k) ++at;
+      const ParityVerdict verdict = parity_of({records.data() + begin, at - begin});
+      const uint32_t i = pending[k];
+      odd_votes[i] += verdict.odd;
+      if (verdict.trusted) {
+        inside[i] = verdict.odd;
+      } else if (round + 1 < kOccupancyDirections) {
+        undecided.push_back(i);
+      } else {
+        inside[i] = 2 * odd_votes[i] > kOccupancyDirections;  // every direction met an edge
+      }
+    }
+    pending = std::move(undecided);
+  }
+  total.rays = points.size();
+  total.rays_hit = 0;
+  for (const uint8_t flag : inside) total.rays_hit += flag;
+  if (stats_out != nullptr) *stats_out = total;
+  return Status::Ok();
 }
 
 namespace {
 
 // The dynamic layer after the static scene, merged into its answers.
 template <QueryKind kKind>
-void trace_dynamic(const DynamicSnapshot& dynamic, std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
-                   QueryStats& stats) {
+Status trace_dynamic(const DynamicSnapshot& dynamic, std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
+                     QueryStats& stats) {
   stats.dynamic_version = dynamic.version;
   stats.dynamic_instances = dynamic.instances.size();
-  if (dynamic.instances.empty()) return;
+  if (dynamic.instances.empty()) return Status::Ok();
+  if constexpr (kKind == QueryKind::kAllHits) {
+    return failed_precondition("count and list queries see the static scene only, and the dynamic layer holds " +
+                               std::to_string(dynamic.instances.size()) +
+                               " instance(s) at version " + std::to_string(dynamic.version));
+  }
   const auto start = Clock::now();
   const uint64_t newly_hit = kKind == QueryKind::kClosestHit
                                  ? dynamic.intersect(rays, {hits, rays.size()})
@@ -122,6 +224,7 @@ void trace_dynamic(const DynamicSnapshot& dynamic, std::span<const Ray> rays, Hi
   stats.rays_hit += newly_hit;
   stats.rays_hit_only_dynamic += newly_hit;
   stats.seconds_dynamic += seconds_since(start);
+  return Status::Ok();
 }
 
 template <QueryKind kKind>
@@ -138,8 +241,10 @@ Status run_strategy(BatchStrategy strategy, StrategyContext<kKind>& ctx) {
 }  // namespace
 
 template <QueryKind kKind>
-Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
+Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryOptions& options,
                         QueryStats* stats_out) {
+  Hit* const hits = answers.hits;
+  uint8_t* const occluded = answers.occluded;
   const auto start = Clock::now();
   const uint64_t ticks_start = ticks();
   const uint32_t brick_count = store_->brick_count();
@@ -173,7 +278,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       plan.strategy == BatchStrategy::kInCacheSweep || plan.strategy == BatchStrategy::kResidentSet;
   if ((!chunked || validate_apart) && scratch->valid.size() < n) scratch->valid.resize(n);
   if (!chunked && scratch->progress.size() < n) scratch->progress.resize(n);
-  const QueryBatch<kKind> batch{rays, hits, occluded, scratch->valid.data(), validate_apart};
+  const QueryBatch<kKind> batch{rays,           hits, occluded, scratch->valid.data(), validate_apart,
+                                answers.hit_counts, answers.collector};
   if (validate_apart)
     OUTCORE_RETURN_IF_ERROR(validate_batch(batch, options.strict, tally.stats.invalid_rays));
 
@@ -195,7 +301,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
       batch,           walk, *cache_, *store_, gate, demand, *scratch, options, bricks_budget_holds_,
       counters_before, tally};
   OUTCORE_RETURN_IF_ERROR(run_strategy(plan.strategy, ctx));
-  trace_dynamic<kKind>(*dynamic, rays, hits, occluded, tally.stats);
+  OUTCORE_RETURN_IF_ERROR(trace_dynamic<kKind>(*dynamic, rays, hits, occluded, tally.stats));
 
   // The batch's evicted bricks hold no pages past its end.
   cache_->release_evicted_pages();
@@ -204,9 +310,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded,
   return Status::Ok();
 }
 
-template Status QueryEngine::run<QueryKind::kClosestHit>(std::span<const Ray>, Hit*, uint8_t*,
-                                                         const QueryOptions&, QueryStats*);
-template Status QueryEngine::run<QueryKind::kAnyHit>(std::span<const Ray>, Hit*, uint8_t*,
-                                                     const QueryOptions&, QueryStats*);
+template Status QueryEngine::run<QueryKind::kClosestHit>(std::span<const Ray>, Answers, const QueryOptions&,
+                                                         QueryStats*);
+template Status QueryEngine::run<QueryKind::kAnyHit>(std::span<const Ray>, Answers, const QueryOptions&,
+                                                     QueryStats*);
+template Status QueryEngine::run<QueryKind::kAllHits>(std::span<const Ray>, Answers, const QueryOptions&,
+                                                      QueryStats*);
 
 }  // namespace outcore

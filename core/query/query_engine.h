@@ -59,7 +59,8 @@
 
 namespace outcore {
 
-struct BatchScratch;  // batch_scratch.h
+struct AllHitsCollector;  // query_batch.h
+struct BatchScratch;      // batch_scratch.h
 struct UpperWalks;    // upper_walks.h
 
 struct EngineOptions {
@@ -146,6 +147,24 @@ class QueryEngine {
   Status occluded(std::span<const Ray> rays, std::span<uint8_t> occluded, const QueryOptions& options,
                   QueryStats* stats = nullptr);
 
+  // Every hit of every ray (Open3D's count_intersections and
+  // list_intersections): counts[i] hits on ray i in (tnear, tfar], each
+  // triangle once; with `records`, every (ray, hit) too, sorted by ray, then
+  // t, then (geometry_id, primitive_id). counts.size() must equal
+  // rays.size(). The dynamic layer is not seen: FAILED_PRECONDITION when it
+  // holds instances.
+  Status all_hits(std::span<const Ray> rays, std::span<uint32_t> counts, std::vector<RayHitRecord>* records,
+                  const QueryOptions& options, QueryStats* stats = nullptr);
+  // The closest point of the scene to each point (point_queries.h);
+  // answers.size() must equal points.size(). Like all_hits, the static
+  // scene only: FAILED_PRECONDITION while the dynamic layer holds instances.
+  Status closest_points(std::span<const Vec3f> points, std::span<ClosestPoint> answers,
+                        const QueryOptions& options, QueryStats* stats = nullptr);
+  // Whether each point is inside the closed surfaces, by the parity of
+  // every-hit counts along rays from it (point_queries.h).
+  Status occupancy(std::span<const Vec3f> points, std::span<uint8_t> inside, const QueryOptions& options,
+                   QueryStats* stats = nullptr);
+
   const SceneStore& store() const { return *store_; }
   const BrickCache& cache() const { return *cache_; }
   // nullptr when proxies are off.
@@ -173,9 +192,14 @@ class QueryEngine {
               uint64_t bricks_budget_holds, DynamicTopLevel dynamic_top_level);
 
   // Plans the batch (batch_planner.h) and runs its strategy (strategy.h).
+  struct Answers {
+    Hit* hits = nullptr;
+    uint8_t* occluded = nullptr;
+    uint32_t* hit_counts = nullptr;
+    AllHitsCollector* collector = nullptr;
+  };
   template <QueryKind kKind>
-  Status run(std::span<const Ray> rays, Hit* hits, uint8_t* occluded, const QueryOptions& options,
-             QueryStats* stats);
+  Status run(std::span<const Ray> rays, Answers answers, const QueryOptions& options, QueryStats* stats);
 
   std::shared_ptr<const SceneStore> store_;
   std::unique_ptr<BrickCache> cache_;

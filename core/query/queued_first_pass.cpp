@@ -124,5 +124,6 @@ void queue_first_bricks(StrategyContext<kKind>& ctx, BrickQueues& queues) {
 
 template void queue_first_bricks(StrategyContext<QueryKind::kClosestHit>&, BrickQueues&);
 template void queue_first_bricks(StrategyContext<QueryKind::kAnyHit>&, BrickQueues&);
+template void queue_first_bricks(StrategyContext<QueryKind::kAllHits>&, BrickQueues&);
 
 }  // namespace outcore

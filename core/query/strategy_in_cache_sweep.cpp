@@ -199,5 +199,6 @@ Status run_in_cache_sweep(StrategyContext<kKind>& ctx, std::vector<PinnedBrick> 
 
 template Status run_in_cache_sweep(StrategyContext<QueryKind::kClosestHit>&, std::vector<PinnedBrick>);
 template Status run_in_cache_sweep(StrategyContext<QueryKind::kAnyHit>&, std::vector<PinnedBrick>);
+template Status run_in_cache_sweep(StrategyContext<QueryKind::kAllHits>&, std::vector<PinnedBrick>);
 
 }  // namespace outcore

@@ -348,5 +348,6 @@ Status run_queued(StrategyContext<kKind>& ctx) {
 
 template Status run_queued(StrategyContext<QueryKind::kClosestHit>&);
 template Status run_queued(StrategyContext<QueryKind::kAnyHit>&);
+template Status run_queued(StrategyContext<QueryKind::kAllHits>&);
 
 }  // namespace outcore

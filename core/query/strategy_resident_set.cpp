@@ -37,7 +37,7 @@ SetChunk trace_chunk(const QueryBatch<kKind>& batch, const ResidentBrickSet& set
   const std::span<const uint32_t> traced(ids.data(), count);
   if constexpr (kKind == QueryKind::kClosestHit) {
     set.intersect(traced, batch.rays.data(), batch.hits);
-  } else {
+  } else if constexpr (kKind == QueryKind::kAnyHit) {
     set.occluded(traced, batch.rays.data(), batch.occluded);
   }
   for (const uint32_t i : traced) chunk.hit += batch.answered_hit(i);
@@ -49,6 +49,9 @@ SetChunk trace_chunk(const QueryBatch<kKind>& batch, const ResidentBrickSet& set
 
 template <QueryKind kKind>
 Status run_resident_set(StrategyContext<kKind>& ctx) {
+  // The engine turns the set off for every-hit batches (a set answers
+  // closest and any hit only).
+  if constexpr (kKind == QueryKind::kAllHits) return internal_error("resident set asked for every hit");
   const QueryBatch<kKind>& batch = ctx.batch;
   QueryStats& stats = ctx.tally.stats;
   const uint32_t brick_count = ctx.brick_count();
@@ -96,5 +99,6 @@ Status run_resident_set(StrategyContext<kKind>& ctx) {
 
 template Status run_resident_set(StrategyContext<QueryKind::kClosestHit>&);
 template Status run_resident_set(StrategyContext<QueryKind::kAnyHit>&);
+template Status run_resident_set(StrategyContext<QueryKind::kAllHits>&);
 
 }  // namespace outcore

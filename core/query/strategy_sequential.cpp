@@ -39,5 +39,6 @@ Status run_sequential(StrategyContext<kKind>& ctx) {
 
 template Status run_sequential(StrategyContext<QueryKind::kClosestHit>&);
 template Status run_sequential(StrategyContext<QueryKind::kAnyHit>&);
+template Status run_sequential(StrategyContext<QueryKind::kAllHits>&);
 
 }  // namespace outcore

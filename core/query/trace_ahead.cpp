@@ -133,5 +133,6 @@ void TraceAhead<kKind>::trace_at(uint32_t brick, const BrickAccel& accel, BatchT
 
 template class TraceAhead<QueryKind::kClosestHit>;
 template class TraceAhead<QueryKind::kAnyHit>;
+template class TraceAhead<QueryKind::kAllHits>;
 
 }  // namespace outcore

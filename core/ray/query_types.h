@@ -23,6 +23,7 @@ inline bool hit_is_better(float t, uint32_t geometry_id, uint32_t primitive_id, 
   return primitive_id < current.primitive_id;
 }
 
-enum class QueryKind { kClosestHit, kAnyHit };
+// kAllHits: every hit along each ray (count and list queries).
+enum class QueryKind { kClosestHit, kAnyHit, kAllHits };
 
 }  // namespace outcore

@@ -39,6 +39,14 @@ class AutoBrickAccel final : public BrickAccel {
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override {
     inner_->occluded(ray_ids, rays, occluded);
   }
+  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                std::vector<RayHitRecord>& out) const override {
+    inner_->all_hits(ray_ids, rays, out);
+  }
+  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                      ClosestPoint* best) const override {
+    inner_->closest_points(point_ids, points, best);
+  }
   uint64_t memory_bytes() const override { return inner_->memory_bytes() + sizeof(*this); }
   double build_seconds() const override { return inner_->build_seconds(); }
   uint32_t triangle_count() const override { return inner_->triangle_count(); }

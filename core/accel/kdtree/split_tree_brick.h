@@ -30,6 +30,7 @@
 #include <string>
 
 #include "core/accel/brick_accel_factory.h"
+#include "core/accel/bvh/scalar_triangle_test_dispatch.h"
 #include "core/accel/brick_serializer.h"
 #include "core/accel/bvh/triangle_test_kind.h"
 #include "core/geometry/hit_rounding.h"
@@ -64,6 +65,20 @@ class SplitTreeBrickAccel final : public BrickAccel {
 
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
+  // Every hit and closest points scan the brick's triangles (exact; the
+  // trees' walks stop at a ray's first hit and know no point distance).
+  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                std::vector<RayHitRecord>& out) const override {
+    const auto view = tree_.view();
+    with_scalar_triangle_test(test_, [&]<class Test>() {
+      all_hits_by_scan<Test>(view.triangles, view.records, ray_ids, rays, out);
+    });
+  }
+  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                      ClosestPoint* best) const override {
+    const auto view = tree_.view();
+    closest_points_by_scan(view.triangles, view.records, point_ids, points, best);
+  }
 
   uint64_t memory_bytes() const override { return tree_.memory_bytes() + kOverheadBytes; }
   double build_seconds() const override { return build_seconds_; }

@@ -1,0 +1,150 @@
+// The bvh brick's every-hit and closest-point queries (brick_queries.h) as
+// walks of its wide tree: a ray's walk tests every child box its segment
+// meets and never shortens the segment; a point's walk visits children
+// nearest first and skips a box farther than the best point so far (<=, so
+// a tie with a smaller id is still found). Scalar and one ray or point at a
+// time: these queries are rarer than closest hits, and exactness comes first.
+//
+// Box tests are in float64 on boxes grown by kBoxSlack of their coordinates'
+// magnitude (16 float ulps and more), so a triangle the test hits is never
+// culled by rounding.
+//
+// Thread-safety: pure functions over an immutable view.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/accel/brick_queries.h"
+#include "core/accel/bvh/wide_bvh.h"
+
+namespace outcore {
+
+namespace wide_bvh_queries_detail {
+
+inline constexpr double kBoxSlack = 1.0 / (1 << 20);
+// Every child of a node may be pushed: 7 waiting per level at most.
+inline constexpr uint32_t kStackSize = kMaxBvhDepth * (kWideBvhWidth - 1) + 1;
+
+struct RaySegment {
+  double origin[3], inverse[3], direction[3];
+  double tnear, tfar;
+
+  explicit RaySegment(const Ray& ray) : tnear(ray.tnear), tfar(ray.tfar) {
+    for (int a = 0; a < 3; ++a) {
+      origin[a] = ray.origin[a];
+      direction[a] = ray.direction[a];
+      inverse[a] = 1.0 / direction[a];
+    }
+    tfar += std::abs(tfar) * kBoxSlack;
+  }
+  bool meets(const WideBvhNode& node, uint32_t k) const {
+    double lo_t = tnear, hi_t = tfar;
+    for (int a = 0; a < 3; ++a) {
+      const double lo = node.lo[a][k], hi = node.hi[a][k];
+      const double pad = (std::abs(lo) + std::abs(hi)) * kBoxSlack + 1e-30;
+      if (direction[a] == 0) {
+        if (origin[a] < lo - pad || origin[a] > hi + pad) return false;
+        continue;
+      }
+      double t0 = (lo - pad - origin[a]) * inverse[a], t1 = (hi + pad - origin[a]) * inverse[a];
+      if (t0 > t1) std::swap(t0, t1);
+      lo_t = std::max(lo_t, t0);
+      hi_t = std::min(hi_t, t1);
+    }
+    return lo_t <= hi_t;
+  }
+};
+
+}  // namespace wide_bvh_queries_detail
+
+template <class Test>
+void wide_bvh_all_hits(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
+                       std::vector<RayHitRecord>& out) {
+  using namespace wide_bvh_queries_detail;
+  if (tree.nodes.empty()) return;
+  uint32_t stack[kStackSize];
+  for (const uint32_t i : ray_ids) {
+    const Ray& ray = rays[i];
+    const typename Test::Prepared prepared = Test::prepare(ray);
+    const RaySegment segment(ray);
+    uint32_t size = 0;
+    stack[size++] = 0;
+    while (size > 0) {
+      const WideBvhNode& node = tree.nodes[stack[--size]];
+      for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
+        const uint8_t bit = uint8_t{1} << k;
+        if ((node.child_mask() & bit) == 0 || !segment.meets(node, k)) continue;
+        if ((node.inner_mask & bit) != 0) {
+          stack[size++] = node.child[k];
+          continue;
+        }
+        for (uint32_t slot = node.child[k]; slot < node.child[k] + node.leaf_triangles[k]; ++slot) {
+          const TrianglePacket& packet = tree.packets[slot / kPacketLanes];
+          const uint32_t lane = slot % kPacketLanes;
+          if (packet.primitive_id[lane] == kInvalidId) continue;
+          const Triangle tri = packet.triangle(lane);
+          TriangleHit found;
+          if (!Test::hit(prepared, tri, ray.tnear, ray.tfar, found)) continue;
+          out.push_back({i, hit_of(found, packet.geometry_id[lane], packet.primitive_id[lane], tri.unit_normal())});
+        }
+      }
+    }
+  }
+}
+
+inline void wide_bvh_closest_points(const WideBvhView& tree, std::span<const uint32_t> point_ids,
+                                    const Vec3f* points, ClosestPoint* best) {
+  using namespace wide_bvh_queries_detail;
+  if (tree.nodes.empty()) return;
+  struct Entry {
+    uint32_t node;
+    double distance_squared;
+  };
+  Entry stack[kStackSize];
+  for (const uint32_t i : point_ids) {
+    const Vec3d p(points[i]);
+    ClosestPoint& answer = best[i];
+    uint32_t size = 0;
+    stack[size++] = {0, 0.0};
+    while (size > 0) {
+      const Entry entry = stack[--size];
+      if (entry.distance_squared > answer.distance_squared) continue;
+      const WideBvhNode& node = tree.nodes[entry.node];
+      Entry inner[kWideBvhWidth];
+      uint32_t inner_count = 0;
+      for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
+        const uint8_t bit = uint8_t{1} << k;
+        if ((node.child_mask() & bit) == 0) continue;
+        const double d2 = distance_squared_to_box(p, node.box(k));
+        if (d2 > answer.distance_squared) continue;
+        if ((node.inner_mask & bit) != 0) {
+          inner[inner_count++] = {node.child[k], d2};
+          continue;
+        }
+        for (uint32_t slot = node.child[k]; slot < node.child[k] + node.leaf_triangles[k]; ++slot) {
+          const TrianglePacket& packet = tree.packets[slot / kPacketLanes];
+          const uint32_t lane = slot % kPacketLanes;
+          if (packet.primitive_id[lane] == kInvalidId) continue;
+          const Triangle tri = packet.triangle(lane);
+          const TrianglePoint found = closest_point_on_triangle(p, tri);
+          if (!closest_is_better(found.distance_squared, packet.geometry_id[lane], packet.primitive_id[lane],
+                                 answer))
+            continue;
+          answer = {found.distance_squared,          Vec3f(found.point),           packet.geometry_id[lane],
+                    packet.primitive_id[lane],       static_cast<float>(found.u), static_cast<float>(found.v),
+                    tri.unit_normal()};
+        }
+      }
+      // Nearest on top of the stack.
+      std::sort(inner, inner + inner_count,
+                [](const Entry& a, const Entry& b) { return a.distance_squared > b.distance_squared; });
+      for (uint32_t k = 0; k < inner_count; ++k) stack[size++] = inner[k];
+    }
+  }
+}
+
+}  // namespace outcore
