@@ -116,7 +116,8 @@ grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context,
     std::vector<uint32_t> counts;
     QueryStats stats;
     OUTCORE_RETURN_IF_ERROR(every_hit(*request, counts, nullptr, stats));
-    set_reply_header(response, counts.size(), request->sequence());
+    response->set_layout_version(1);
+    response->set_ray_count(counts.size());
     response->mutable_counts()->assign(reinterpret_cast<const char*>(counts.data()), counts.size() * 4);
     wire::to_wire(stats, response->mutable_stats());
     return Status::Ok();

@@ -4,6 +4,7 @@
 // quarter of the scene on the server), list replies too large for a message
 // are cut by the client, and bad requests are errors naming what is wrong.
 #include <gtest/gtest.h>
+#include <signal.h>
 
 #include <cmath>
 #include <cstring>
@@ -39,7 +40,9 @@ class EveryHitAndPointCalls : public ::testing::Test {
   }
   static void TearDownTestSuite() {
     delete engine_;
-    if (server_ != nullptr) EXPECT_EQ(server_->stop(SIGTERM), 0);
+    if (server_ != nullptr) {
+      EXPECT_EQ(server_->stop(SIGTERM), 0);
+    }
     delete server_;
     delete scene_;
   }
@@ -96,7 +99,7 @@ TEST_F(EveryHitAndPointCalls, CountsAndListsAreTheEnginesBitwiseAcrossMessages) 
   for (std::size_t k = 0; k < hits.size(); ++k)
     ASSERT_EQ(std::memcmp(&hits[k], &expected[k].hit, sizeof(Hit)), 0) << "hit " << k;
   EXPECT_GT(stats.messages, 1u);
-  EXPECT_GT(stats.engine.cache_misses(), 0u);
+  EXPECT_GT(stats.engine.brick_visits(), batch.size() / 2);
 }
 
 TEST_F(EveryHitAndPointCalls, PointAnswersAreTheEnginesBitwise) {

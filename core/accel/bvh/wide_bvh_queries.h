@@ -139,9 +139,14 @@ inline void wide_bvh_closest_points(const WideBvhView& tree, std::span<const uin
                     tri.unit_normal()};
         }
       }
-      // Nearest on top of the stack.
-      std::sort(inner, inner + inner_count,
-                [](const Entry& a, const Entry& b) { return a.distance_squared > b.distance_squared; });
+      // Nearest on top of the stack: farthest pushed first (insertion sort of
+      // at most 8, descending).
+      for (uint32_t k = 1; k < inner_count; ++k) {
+        const Entry entry_k = inner[k];
+        uint32_t j = k;
+        for (; j > 0 && inner[j - 1].distance_squared < entry_k.distance_squared; --j) inner[j] = inner[j - 1];
+        inner[j] = entry_k;
+      }
       for (uint32_t k = 0; k < inner_count; ++k) stack[size++] = inner[k];
     }
   }
