@@ -56,9 +56,10 @@ Expected<std::vector<Vec3f>> decode_points(const v1::PointRequest& request, uint
                             " bytes; point_count " + std::to_string(n) + " needs " + std::to_string(n * 12) +
                             " (12 each)");
   if (n * per_point + kReplyOverheadBytes > max_message_bytes)
-    return resource_exhausted("the reply to " + std::to_string(n) + " points would take about " +
-                              std::to_string(n * per_point) + " bytes, over the server's max message size of " +
-                              std::to_string(max_message_bytes) + " bytes (--max-message-mb); send fewer points");
+    return resource_exhausted(
+        "the reply to " + std::to_string(n) + " points would take about " + std::to_string(n * per_point) +
+        " bytes, over the server's max message size of " + std::to_string(max_message_bytes) +
+        " bytes (--max-message-mb); send fewer points");
   std::vector<Vec3f> points(n);
   if (n > 0) std::memcpy(static_cast<void*>(points.data()), request.points().data(), n * 12);
   return points;
@@ -78,8 +79,8 @@ void pack_points(v1::PointQueryKind kind, const std::vector<ClosestPoint>& close
     float distance = c.found() ? distance_of(c) : std::numeric_limits<float>::infinity();
     if (kind == v1::POINT_QUERY_SIGNED_DISTANCE && inside[i] != 0) distance = -distance;
     if (kind == v1::POINT_QUERY_CLOSEST) {
-      const ClosestRecord record{c.point.x,     c.point.y,  c.point.z,  c.geometry_id, c.primitive_id, c.u,
-                                 c.v,           c.normal.x, c.normal.y, c.normal.z,    distance};
+      const ClosestRecord record{c.point.x, c.point.y,  c.point.z,  c.geometry_id, c.primitive_id, c.u,
+                                 c.v,       c.normal.x, c.normal.y, c.normal.z,    distance};
       std::memcpy(out.data() + i * sizeof(record), &record, sizeof(record));
     } else {
       std::memcpy(out.data() + i * sizeof(float), &distance, sizeof(float));
@@ -89,11 +90,11 @@ void pack_points(v1::PointQueryKind kind, const std::vector<ClosestPoint>& close
 
 }  // namespace
 
-Status SceneQueryService::every_hit(const v1::QueryRequest& request,
-                                    std::vector<uint32_t>& counts, std::vector<RayHitRecord>* records,
-                                    QueryStats& stats) {
+Status SceneQueryService::every_hit(const v1::QueryRequest& request, std::vector<uint32_t>& counts,
+                                    std::vector<RayHitRecord>* records, QueryStats& stats) {
   if (request.has_shared())
-    return invalid_argument("request: shared payloads are for Intersect and Occluded; send the rays as bytes");
+    return invalid_argument(
+        "request: shared payloads are for Intersect and Occluded; send the rays as bytes");
   const BatchPosition position;
   std::vector<Ray> widened;
   OUTCORE_ASSIGN_OR_RETURN(const std::span<const Ray> rays,
@@ -109,7 +110,8 @@ Status SceneQueryService::every_hit(const v1::QueryRequest& request,
   return Status::Ok();
 }
 
-grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context, const v1::QueryRequest* request,
+grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context,
+                                                   const v1::QueryRequest* request,
                                                    v1::CountResponse* response) {
   const auto start = Clock::now();
   const auto run = [&]() -> Status {
@@ -127,7 +129,8 @@ grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context,
   return finish(context, "CountIntersections", to_grpc_status(run()), request->batch().ray_count(), start);
 }
 
-grpc::Status SceneQueryService::ListIntersections(grpc::ServerContext* context, const v1::QueryRequest* request,
+grpc::Status SceneQueryService::ListIntersections(grpc::ServerContext* context,
+                                                  const v1::QueryRequest* request,
                                                   v1::ListResponse* response) {
   const auto start = Clock::now();
   const auto run = [&]() -> Status {

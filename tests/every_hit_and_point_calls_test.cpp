@@ -31,7 +31,8 @@ class EveryHitAndPointCalls : public ::testing::Test {
     scene_ = testing::pack_test_scene({"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=3"}, 200).release();
     std::string error;
     // --max-message-mb 1: a list of many hits needs several messages.
-    server_ = ServerProcess::start(scene_->path, {"--cache-mb", "1", "--max-message-mb", "1"}, error).release();
+    server_ =
+        ServerProcess::start(scene_->path, {"--cache-mb", "1", "--max-message-mb", "1"}, error).release();
     ASSERT_NE(server_, nullptr) << error;
     EngineOptions options;
     auto engine = QueryEngine::open(scene_->path, options);

@@ -235,7 +235,7 @@ Status SceneClient::occluded(std::span<const Ray> rays, std::span<uint8_t> occlu
 }
 
 Status SceneClient::every_hit_chunk(std::span<const Ray> rays, bool listing, std::vector<uint32_t>& counts,
-                                   std::vector<Hit>* hits, const CallOptions& options, CallStats* stats) {
+                                    std::vector<Hit>* hits, const CallOptions& options, CallStats* stats) {
   v1::QueryRequest request;
   fill_request(rays, 0, options, request);
   grpc::ClientContext context;
@@ -259,8 +259,9 @@ Status SceneClient::every_hit_chunk(std::span<const Ray> rays, bool listing, std
   uint64_t total = 0;
   for (std::size_t i = before; i < counts.size(); ++i) total += counts[i];
   if (list.hit_count() != total || list.hits().size() != total * sizeof(Hit))
-    return internal_error("the server's reply to ListIntersections holds " + std::to_string(list.hits().size()) +
-                          " hit bytes, its counts say " + std::to_string(total) + " hits");
+    return internal_error("the server's reply to ListIntersections holds " +
+                          std::to_string(list.hits().size()) + " hit bytes, its counts say " +
+                          std::to_string(total) + " hits");
   const std::size_t at = hits->size();
   hits->resize(at + total);
   if (total > 0) std::memcpy(static_cast<void*>(hits->data() + at), list.hits().data(), list.hits().size());

@@ -60,11 +60,12 @@ inline void offer_closest(const Vec3d& p, const Triangle& tri, uint32_t geometry
                           const Vec3f& normal, ClosestPoint& best) {
   const TrianglePoint found = closest_point_on_triangle(p, tri);
   if (!closest_is_better(found.distance_squared, geometry_id, primitive_id, best)) return;
-  best = {found.distance_squared, Vec3f(found.point), geometry_id, primitive_id,
+  best = {found.distance_squared,      Vec3f(found.point),          geometry_id, primitive_id,
           static_cast<float>(found.u), static_cast<float>(found.v), normal};
 }
 
-inline Hit hit_of(const TriangleHit& found, uint32_t geometry_id, uint32_t primitive_id, const Vec3f& normal) {
+inline Hit hit_of(const TriangleHit& found, uint32_t geometry_id, uint32_t primitive_id,
+                  const Vec3f& normal) {
   return {found.t, geometry_id, primitive_id, found.u, found.v, normal};
 }
 

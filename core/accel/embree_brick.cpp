@@ -489,8 +489,8 @@ const std::string& EmbreeBrickBuilder::name() const {
 
 void EmbreeBrickAccel::all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
                                 std::vector<RayHitRecord>& out) const {
-  all_hits_by_scan<WatertightTriangleTest>({triangles_.data(), hit_records_.size()}, hit_records_, ray_ids, rays,
-                                           out);
+  all_hits_by_scan<WatertightTriangleTest>({triangles_.data(), hit_records_.size()}, hit_records_, ray_ids,
+                                           rays, out);
 }
 
 void EmbreeBrickAccel::closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,

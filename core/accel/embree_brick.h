@@ -132,8 +132,10 @@ class EmbreeBrickAccel final : public BrickAccel {
   // Every hit and closest points scan the brick's triangles with the
   // watertight test (brick_queries.h): exact, where Embree's own test may
   // report a triangle twice (spatial splits) or lose an edge.
-  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out) const override;
-  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points, ClosestPoint* best) const override;
+  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                std::vector<RayHitRecord>& out) const override;
+  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                      ClosestPoint* best) const override;
 
   uint64_t memory_bytes() const override;
   double build_seconds() const override { return build_seconds_; }

@@ -6,8 +6,8 @@
 #include <utility>
 
 #include "core/accel/brick_build_input.h"
-#include "core/accel/triangle_hit_records.h"
 #include "core/accel/bvh/double_triangle_test.h"
+#include "core/accel/triangle_hit_records.h"
 #include "core/ray/query_types.h"
 
 namespace outcore {

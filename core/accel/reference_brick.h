@@ -39,15 +39,17 @@ class ReferenceBrickAccel final : public BrickAccel {
 
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
-  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out) const override;
-  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points, ClosestPoint* best) const override;
+  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                std::vector<RayHitRecord>& out) const override;
+  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                      ClosestPoint* best) const override;
   uint64_t memory_bytes() const override;
   double build_seconds() const override { return build_seconds_; }
   uint32_t triangle_count() const override { return triangle_count_; }
 
  private:
   ReferenceBrickAccel() = default;
-  std::vector<Triangle> triangles_;  // the usable ones
+  std::vector<Triangle> triangles_;    // the usable ones
   std::vector<BvhHitRecord> records_;  // records_[k] belongs to triangles_[k]
   uint32_t triangle_count_ = 0;
   double build_seconds_ = 0;

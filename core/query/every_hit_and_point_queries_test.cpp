@@ -270,9 +270,11 @@ TEST(ClosestPointQuery, InvalidPointsAreCountedOrNamedUnderStrict) {
 std::string write_cube(const testing::TempDir& dir) {
   const std::string path = dir.file("cube.obj");
   std::ofstream obj(path);
-  for (int i = 0; i < 8; ++i) obj << "v " << (i & 1 ? 1 : -1) << ' ' << (i & 2 ? 1 : -1) << ' ' << (i & 4 ? 1 : -1) << '\n';
+  for (int i = 0; i < 8; ++i)
+    obj << "v " << (i & 1 ? 1 : -1) << ' ' << (i & 2 ? 1 : -1) << ' ' << (i & 4 ? 1 : -1) << '\n';
   // Faces (1-based), two triangles each, counter-clockwise seen from outside.
-  const int quads[6][4] = {{1, 3, 4, 2}, {5, 6, 8, 7}, {1, 2, 6, 5}, {3, 7, 8, 4}, {1, 5, 7, 3}, {2, 4, 8, 6}};
+  const int quads[6][4] = {{1, 3, 4, 2}, {5, 6, 8, 7}, {1, 2, 6, 5},
+                           {3, 7, 8, 4}, {1, 5, 7, 3}, {2, 4, 8, 6}};
   for (const auto& q : quads) {
     obj << "f " << q[0] << ' ' << q[1] << ' ' << q[2] << '\n';
     obj << "f " << q[0] << ' ' << q[2] << ' ' << q[3] << '\n';
@@ -310,8 +312,8 @@ TEST(OccupancyQuery, ExactInsideACubeEvenWhereTheFirstRayMeetsAnEdgeOrVertex) {
   std::vector<uint8_t> inside(points.size());
   ASSERT_TRUE(engine->occupancy(points, inside, {}).ok());
   for (std::size_t i = 0; i < points.size(); ++i)
-    EXPECT_EQ(inside[i], expected[i]) << "point " << i << " (" << points[i].x << ", " << points[i].y << ", "
-                                      << points[i].z << ")";
+    EXPECT_EQ(inside[i], expected[i])
+        << "point " << i << " (" << points[i].x << ", " << points[i].y << ", " << points[i].z << ")";
 }
 
 TEST(OccupancyQuery, InsideAndOutsideClosedMeshes) {

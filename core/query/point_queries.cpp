@@ -88,7 +88,8 @@ std::vector<std::pair<std::size_t, std::size_t>> brick_groups(
 // Searches each group's brick for its pairs' points, each pair starting
 // from (and writing) found[k].
 Status search_groups(PointQueryContext& ctx, std::span<const Vec3f> points,
-                     const std::vector<std::pair<uint32_t, uint32_t>>& pairs, std::vector<ClosestPoint>& found) {
+                     const std::vector<std::pair<uint32_t, uint32_t>>& pairs,
+                     std::vector<ClosestPoint>& found) {
   const auto groups = brick_groups(pairs);
   std::vector<PinningTask> tasks(groups.size());
   tbb::parallel_for(std::size_t{0}, groups.size(), std::size_t{1}, [&](std::size_t g) {
@@ -131,7 +132,8 @@ Status find_closest_points(PointQueryContext& ctx, std::span<const Vec3f> points
                            std::span<ClosestPoint> answers) {
   QueryStats& stats = ctx.tally.stats;
   const UpperHierarchy& upper = ctx.store.manifest().upper;
-  if (upper.depth() >= kUpperStack / 2) return internal_error("upper hierarchy deeper than point walks allow");
+  if (upper.depth() >= kUpperStack / 2)
+    return internal_error("upper hierarchy deeper than point walks allow");
   const std::size_t n = points.size();
   std::vector<std::pair<uint32_t, uint32_t>> pairs;  // (brick, point)
   pairs.reserve(n);
@@ -182,9 +184,11 @@ Status find_closest_points(PointQueryContext& ctx, std::span<const Vec3f> points
 }
 
 Vec3f occupancy_direction(int round) {
-  static constexpr float kDirections[kOccupancyDirections][3] = {
-      {0.26171f, 0.88130f, 0.39343f},   {-0.64213f, 0.19970f, 0.74020f}, {0.45131f, -0.72710f, 0.51740f},
-      {-0.31190f, -0.40270f, -0.86070f}, {0.89120f, 0.31210f, -0.32900f}};
+  static constexpr float kDirections[kOccupancyDirections][3] = {{0.26171f, 0.88130f, 0.39343f},
+                                                                 {-0.64213f, 0.19970f, 0.74020f},
+                                                                 {0.45131f, -0.72710f, 0.51740f},
+                                                                 {-0.31190f, -0.40270f, -0.86070f},
+                                                                 {0.89120f, 0.31210f, -0.32900f}};
   const float* d = kDirections[round % kOccupancyDirections];
   return Vec3f(normalize(Vec3d(d[0], d[1], d[2])));
 }

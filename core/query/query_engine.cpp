@@ -213,9 +213,10 @@ Status trace_dynamic(const DynamicSnapshot& dynamic, std::span<const Ray> rays, 
   stats.dynamic_instances = dynamic.instances.size();
   if (dynamic.instances.empty()) return Status::Ok();
   if constexpr (kKind == QueryKind::kAllHits) {
-    return failed_precondition("count and list queries see the static scene only, and the dynamic layer holds " +
-                               std::to_string(dynamic.instances.size()) +
-                               " instance(s) at version " + std::to_string(dynamic.version));
+    return failed_precondition(
+        "count and list queries see the static scene only, and the dynamic layer holds " +
+        std::to_string(dynamic.instances.size()) + " instance(s) at version " +
+        std::to_string(dynamic.version));
   }
   const auto start = Clock::now();
   const uint64_t newly_hit = kKind == QueryKind::kClosestHit
@@ -278,8 +279,8 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
       plan.strategy == BatchStrategy::kInCacheSweep || plan.strategy == BatchStrategy::kResidentSet;
   if ((!chunked || validate_apart) && scratch->valid.size() < n) scratch->valid.resize(n);
   if (!chunked && scratch->progress.size() < n) scratch->progress.resize(n);
-  const QueryBatch<kKind> batch{rays,           hits, occluded, scratch->valid.data(), validate_apart,
-                                answers.hit_counts, answers.collector};
+  const QueryBatch<kKind> batch{
+      rays, hits, occluded, scratch->valid.data(), validate_apart, answers.hit_counts, answers.collector};
   if (validate_apart)
     OUTCORE_RETURN_IF_ERROR(validate_batch(batch, options.strict, tally.stats.invalid_rays));
 

@@ -61,7 +61,7 @@ namespace outcore {
 
 struct AllHitsCollector;  // query_batch.h
 struct BatchScratch;      // batch_scratch.h
-struct UpperWalks;    // upper_walks.h
+struct UpperWalks;        // upper_walks.h
 
 struct EngineOptions {
   // Hard budget for built bricks, in bytes.

@@ -99,8 +99,7 @@ void BvhBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays,
 
 void BvhBrickAccel::all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
                              std::vector<RayHitRecord>& out) const {
-  with_scalar_triangle_test(test_,
-                            [&]<class Test>() { wide_bvh_all_hits<Test>(view_, ray_ids, rays, out); });
+  with_scalar_triangle_test(test_, [&]<class Test>() { wide_bvh_all_hits<Test>(view_, ray_ids, rays, out); });
 }
 
 void BvhBrickAccel::closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,

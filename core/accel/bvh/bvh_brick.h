@@ -76,8 +76,10 @@ class BvhBrickAccel final : public BrickAccel {
 
   void intersect(std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) const override;
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
-  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out) const override;
-  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points, ClosestPoint* best) const override;
+  void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
+                std::vector<RayHitRecord>& out) const override;
+  void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
+                      ClosestPoint* best) const override;
 
   uint64_t memory_bytes() const override { return memory_bytes_; }
   double build_seconds() const override { return build_seconds_; }

@@ -89,7 +89,8 @@ void wide_bvh_all_hits(const WideBvhView& tree, std::span<const uint32_t> ray_id
           const Triangle tri = packet.triangle(lane);
           TriangleHit found;
           if (!Test::hit(prepared, tri, ray.tnear, ray.tfar, found)) continue;
-          out.push_back({i, hit_of(found, packet.geometry_id[lane], packet.primitive_id[lane], tri.unit_normal())});
+          out.push_back(
+              {i, hit_of(found, packet.geometry_id[lane], packet.primitive_id[lane], tri.unit_normal())});
         }
       }
     }
@@ -134,8 +135,8 @@ inline void wide_bvh_closest_points(const WideBvhView& tree, std::span<const uin
           if (!closest_is_better(found.distance_squared, packet.geometry_id[lane], packet.primitive_id[lane],
                                  answer))
             continue;
-          answer = {found.distance_squared,          Vec3f(found.point),           packet.geometry_id[lane],
-                    packet.primitive_id[lane],       static_cast<float>(found.u), static_cast<float>(found.v),
+          answer = {found.distance_squared,    Vec3f(found.point),          packet.geometry_id[lane],
+                    packet.primitive_id[lane], static_cast<float>(found.u), static_cast<float>(found.v),
                     tri.unit_normal()};
         }
       }
@@ -144,7 +145,8 @@ inline void wide_bvh_closest_points(const WideBvhView& tree, std::span<const uin
       for (uint32_t k = 1; k < inner_count; ++k) {
         const Entry entry_k = inner[k];
         uint32_t j = k;
-        for (; j > 0 && inner[j - 1].distance_squared < entry_k.distance_squared; --j) inner[j] = inner[j - 1];
+        for (; j > 0 && inner[j - 1].distance_squared < entry_k.distance_squared; --j)
+          inner[j] = inner[j - 1];
         inner[j] = entry_k;
       }
       for (uint32_t k = 0; k < inner_count; ++k) stack[size++] = inner[k];

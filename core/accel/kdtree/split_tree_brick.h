@@ -30,8 +30,8 @@
 #include <string>
 
 #include "core/accel/brick_accel_factory.h"
-#include "core/accel/bvh/scalar_triangle_test_dispatch.h"
 #include "core/accel/brick_serializer.h"
+#include "core/accel/bvh/scalar_triangle_test_dispatch.h"
 #include "core/accel/bvh/triangle_test_kind.h"
 #include "core/geometry/hit_rounding.h"
 #include "core/store/brick_data.h"
