@@ -14,6 +14,7 @@
 #include "core/query/point_queries.h"
 #include "core/query/query_engine.h"
 #include "tests/support/packed_scene.h"
+#include "tests/support/test_rays.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -32,11 +33,7 @@ std::unique_ptr<QueryEngine> open_engine(const PackedScene& scene, const std::st
 }
 
 Vec3f random_in(std::mt19937_64& rng, const Aabb& box, float grow) {
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  const Vec3f e = box.extent();
-  return {box.lo.x - grow * e.x + u(rng) * (1 + 2 * grow) * e.x,
-          box.lo.y - grow * e.y + u(rng) * (1 + 2 * grow) * e.y,
-          box.lo.z - grow * e.z + u(rng) * (1 + 2 * grow) * e.z};
+  return testing::random_point_in(rng, box, grow);
 }
 
 std::vector<Ray> rays_through(const Aabb& box, std::size_t n, uint64_t seed) {

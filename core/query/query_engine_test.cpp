@@ -14,6 +14,7 @@
 #include "core/store/scene_packer.h"
 #include "core/util/cancellation.h"
 #include "tests/support/packed_scene.h"
+#include "tests/support/test_rays.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -28,11 +29,7 @@ std::unique_ptr<PackedScene> pack(const std::vector<std::string>& inputs, uint32
 }
 
 Vec3f random_in(std::mt19937_64& rng, const Aabb& box, float grow = 0.0f) {
-  std::uniform_real_distribution<float> u(0.0f, 1.0f);
-  const Vec3f e = box.extent();
-  return {box.lo.x - grow * e.x + u(rng) * (1 + 2 * grow) * e.x,
-          box.lo.y - grow * e.y + u(rng) * (1 + 2 * grow) * e.y,
-          box.lo.z - grow * e.z + u(rng) * (1 + 2 * grow) * e.z};
+  return testing::random_point_in(rng, box, grow);
 }
 
 // Rays from around and inside the box, aimed through it; some with short tfar.

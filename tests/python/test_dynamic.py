@@ -127,9 +127,9 @@ def test_bad_input_is_a_named_error_and_changes_nothing(dynamic_server):
         rays = rays_up_at(FAR)
         before = client.cast_rays(rays)
 
-        def refused(code, words, call, *args):
+        def refused(code, words, call, *args, **kwargs):
             with pytest.raises(outcore.OutcoreError) as error:
-                call(*args)
+                call(*args, **kwargs)
             assert error.value.code == code, error.value
             assert words in error.value.details, error.value.details
 
@@ -146,7 +146,7 @@ def test_bad_input_is_a_named_error_and_changes_nothing(dynamic_server):
         bad[3, 1] = 8
         refused("INVALID_ARGUMENT", "triangle 3 names vertex 8", client.add_mesh, CUBE_VERTICES, bad)
         refused("NOT_FOUND", "geometry id", client.remove, geometry + 7)
-        refused("NOT_FOUND", "does not exist yet", client.cast_rays, rays, False, version + 50)
+        refused("NOT_FOUND", "does not exist yet", client.cast_rays, rays, dynamic_version=version + 50)
         with pytest.raises(ValueError):
             client.add_mesh(CUBE_VERTICES[:, :2], CUBE_TRIANGLES)
         # A raw request whose bytes do not match its count.

@@ -59,6 +59,18 @@ struct RaySegment {
   }
 };
 
+// Calls fn(triangle, geometry_id, primitive_id) for each triangle of leaf
+// child k of `node` (padding slots skipped).
+template <class Fn>
+void for_each_leaf_triangle(const WideBvhView& tree, const WideBvhNode& node, uint32_t k, Fn&& fn) {
+  for (uint32_t slot = node.child[k]; slot < node.child[k] + node.leaf_triangles[k]; ++slot) {
+    const TrianglePacket& packet = tree.packets[slot / kPacketLanes];
+    const uint32_t lane = slot % kPacketLanes;
+    if (packet.primitive_id[lane] == kInvalidId) continue;
+    fn(packet.triangle(lane), packet.geometry_id[lane], packet.primitive_id[lane]);
+  }
+}
+
 }  // namespace wide_bvh_queries_detail
 
 template <class Test>
@@ -82,16 +94,12 @@ void wide_bvh_all_hits(const WideBvhView& tree, std::span<const uint32_t> ray_id
           stack[size++] = node.child[k];
           continue;
         }
-        for (uint32_t slot = node.child[k]; slot < node.child[k] + node.leaf_triangles[k]; ++slot) {
-          const TrianglePacket& packet = tree.packets[slot / kPacketLanes];
-          const uint32_t lane = slot % kPacketLanes;
-          if (packet.primitive_id[lane] == kInvalidId) continue;
-          const Triangle tri = packet.triangle(lane);
-          TriangleHit found;
-          if (!Test::hit(prepared, tri, ray.tnear, ray.tfar, found)) continue;
-          out.push_back(
-              {i, hit_of(found, packet.geometry_id[lane], packet.primitive_id[lane], tri.unit_normal())});
-        }
+        for_each_leaf_triangle(tree, node, k,
+                               [&](const Triangle& tri, uint32_t geometry, uint32_t primitive) {
+                                 TriangleHit found;
+                                 if (Test::hit(prepared, tri, ray.tnear, ray.tfar, found))
+                                   out.push_back({i, hit_of(found, geometry, primitive, tri.unit_normal())});
+                               });
       }
     }
   }
@@ -126,19 +134,13 @@ inline void wide_bvh_closest_points(const WideBvhView& tree, std::span<const uin
           inner[inner_count++] = {node.child[k], d2};
           continue;
         }
-        for (uint32_t slot = node.child[k]; slot < node.child[k] + node.leaf_triangles[k]; ++slot) {
-          const TrianglePacket& packet = tree.packets[slot / kPacketLanes];
-          const uint32_t lane = slot % kPacketLanes;
-          if (packet.primitive_id[lane] == kInvalidId) continue;
-          const Triangle tri = packet.triangle(lane);
-          const TrianglePoint found = closest_point_on_triangle(p, tri);
-          if (!closest_is_better(found.distance_squared, packet.geometry_id[lane], packet.primitive_id[lane],
-                                 answer))
-            continue;
-          answer = {found.distance_squared,    Vec3f(found.point),          packet.geometry_id[lane],
-                    packet.primitive_id[lane], static_cast<float>(found.u), static_cast<float>(found.v),
-                    tri.unit_normal()};
-        }
+        for_each_leaf_triangle(
+            tree, node, k, [&](const Triangle& tri, uint32_t geometry, uint32_t primitive) {
+              const TrianglePoint found = closest_point_on_triangle(p, tri);
+              if (!closest_is_better(found.distance_squared, geometry, primitive, answer)) return;
+              answer = {found.distance_squared,      Vec3f(found.point),          geometry,         primitive,
+                        static_cast<float>(found.u), static_cast<float>(found.v), tri.unit_normal()};
+            });
       }
       // Nearest on top of the stack: farthest pushed first (insertion sort of
       // at most 8, descending).
