@@ -9,14 +9,24 @@ with Open3D RaycastingScene-style results.
         o = outcore.spawn_origins(rays, ans) # (..., 3) origins for secondary rays
 
     rays = outcore.create_rays_pinhole(60, center, eye, up, 640, 480)  # Open3D's camera rays
+    outcore.pack(vertices, triangles, "scene.oc")                       # a store from arrays
 
 See docs/PYTHON.md in the repository.
 """
 
 from .client import INVALID_ID, SceneClient
 from .errors import OutcoreError
+from .pack import PackError, pack
 from .pinhole import create_rays_pinhole
 from .spawn import spawn_origins
 
-__all__ = ["SceneClient", "OutcoreError", "INVALID_ID", "spawn_origins", "create_rays_pinhole"]
+__all__ = [
+    "SceneClient",
+    "OutcoreError",
+    "INVALID_ID",
+    "spawn_origins",
+    "create_rays_pinhole",
+    "pack",
+    "PackError",
+]
 __version__ = "0.1.0"
