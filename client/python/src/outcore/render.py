@@ -4,10 +4,11 @@ three modes, with the same colour rules as the C++ `outcore render`.
 The rays are create_rays_pinhole(fov_deg, center, eye, up, width, height)
 (Open3D's camera, outcore/pinhole.py), cast with client.cast_rays; pixel
 (row y, column x) of the image is the ray at [y, x] of those rays, exactly
-as Open3D users get from imshow(ans["t_hit"]). (Open3D's fov form puts
-world-up towards the LAST row and its column 0 towards the camera's right:
-the picture is turned 180 degrees from the usual view; flip it with
-image[::-1, ::-1] if wanted.)
+as Open3D users get from imshow(ans["t_hit"]). Open3D's fov form puts
+`up` towards the LAST row and column 0 towards the camera's right, so with
+the world's up as `up` the picture is turned 180 degrees: give the world's
+down as `up` for an upright picture (as for the C++ `outcore render --up`),
+or turn it with image[::-1, ::-1].
 
 Colour rules (hits_to_image), all arithmetic in float64, every channel
 rounded to nearest with halves away from zero and clamped to 0..255:
