@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 
+#include "core/io/npz_mesh_reader.h"
 #include "core/io/obj_reader.h"
 #include "core/io/ply_reader.h"
 
@@ -20,14 +21,16 @@ std::string lower_extension(const std::string& path) {
 }  // namespace
 
 Expected<std::unique_ptr<TriangleSource>> open_triangle_file(const std::string& path,
-                                                             const SourceOptions& options) {
+                                                             const SourceOptions& options,
+                                                             const HeldMemoryLimit& held) {
   const std::string ext = lower_extension(path);
   if (ext == ".obj") return open_obj_file(path, options);
   if (ext == ".ply") return open_ply_file(path, options);
+  if (ext == ".npz") return open_npz_mesh_file(path, held);
   // The message names gen: too: a user who mistyped a generator lands here.
   return invalid_argument(
       "input '" + path +
-      "': unsupported input kind (expected a .obj or .ply file, or gen:NAME?key=value&...)");
+      "': unsupported input kind (expected a .obj, .ply or .npz file, or gen:NAME?key=value&...)");
 }
 
 }  // namespace outcore

@@ -1,5 +1,5 @@
-// open_triangle_file: opens an OBJ or PLY file as a TriangleSource, chosen by
-// the file's extension (case-insensitive). Unknown extensions are errors,
+// open_triangle_file: opens an OBJ, PLY or .npz (mesh arrays) file as a
+// TriangleSource, chosen by the file's extension (case-insensitive). Unknown extensions are errors,
 // never guesses. Inputs that may also be generators (gen:...) are opened by
 // core/source/source_factory.h, which sits above both readers and generators.
 //
@@ -13,8 +13,10 @@
 
 namespace outcore {
 
-// options reach the file readers (memory for vertices, temporary directory).
+// options reach the OBJ and PLY readers (memory for vertices, temporary
+// directory), held the .npz reader (which holds its mesh, npz_mesh_reader.h).
 Expected<std::unique_ptr<TriangleSource>> open_triangle_file(const std::string& path,
-                                                             const SourceOptions& options = {});
+                                                             const SourceOptions& options = {},
+                                                             const HeldMemoryLimit& held = {});
 
 }  // namespace outcore

@@ -224,6 +224,11 @@ std::string npy_shape_text(const std::vector<uint64_t>& shape) {
   return shape_text(shape);
 }
 
+Expected<std::string_view> npy_array_data(std::string_view bytes, const std::string& name,
+                                          const NpyHeader& header, uint64_t item_bytes) {
+  return array_data(bytes, name, header, item_bytes);
+}
+
 Expected<NpyNumbers> decode_numeric_npy(std::string_view bytes, const std::string& name) {
   OUTCORE_ASSIGN_OR_RETURN(NpyHeader header, parse_npy_header(bytes, name));
   if (header.fortran_order) return invalid_argument(name + " is in Fortran order; C order is needed");

@@ -40,6 +40,11 @@ struct NpyNumbers {
 };
 Expected<NpyNumbers> decode_numeric_npy(std::string_view bytes, const std::string& name);
 std::string npy_shape_text(const std::vector<uint64_t>& shape);
+// The data of a parsed array of items of item_bytes each, for readers that
+// convert it themselves (no copy): DATA_LOSS naming `name` when the bytes
+// hold less than the shape needs, INVALID_ARGUMENT when more.
+Expected<std::string_view> npy_array_data(std::string_view bytes, const std::string& name,
+                                          const NpyHeader& header, uint64_t item_bytes);
 
 // A whole file's bytes (IO_ERROR naming it when it cannot be read).
 Expected<std::string> read_whole_file(const std::string& path);

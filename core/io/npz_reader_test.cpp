@@ -4,71 +4,18 @@
 #include "core/io/npz_reader.h"
 
 #include <gtest/gtest.h>
-#include <zlib.h>
 
 #include <random>
 #include <string>
 #include <vector>
 
+#include "core/io/npz_test_util.h"
+
 namespace outcore {
 namespace {
 
-void put(std::string& out, uint64_t value, int bytes) {
-  for (int i = 0; i < bytes; ++i) out += static_cast<char>((value >> (8 * i)) & 0xff);
-}
-
-std::string deflated(const std::string& data) {
-  z_stream zs{};
-  EXPECT_EQ(deflateInit2(&zs, 6, Z_DEFLATED, -MAX_WBITS, 8, Z_DEFAULT_STRATEGY), Z_OK);
-  std::string out(deflateBound(&zs, data.size()), '\0');
-  zs.next_in = reinterpret_cast<Bytef*>(const_cast<char*>(data.data()));
-  zs.avail_in = static_cast<uInt>(data.size());
-  zs.next_out = reinterpret_cast<Bytef*>(out.data());
-  zs.avail_out = static_cast<uInt>(out.size());
-  EXPECT_EQ(deflate(&zs, Z_FINISH), Z_STREAM_END);
-  out.resize(zs.total_out);
-  deflateEnd(&zs);
-  return out;
-}
-
-struct Entry {
-  std::string name, data;
-  bool deflate = false;
-  bool zip64 = false;  // sizes and offset in a ZIP64 extra field
-};
-
-// A ZIP archive as numpy.savez / savez_compressed write them.
-std::string zip_of(const std::vector<Entry>& entries) {
-  std::string out, directory;
-  for (const Entry& e : entries) {
-    const std::string body = e.deflate ? deflated(e.data) : e.data;
-    const uint32_t crc =
-        crc32(0, reinterpret_cast<const Bytef*>(e.data.data()), static_cast<uInt>(e.data.size()));
-    const uint64_t offset = out.size();
-    put(out, 0x04034b50, 4), put(out, 20, 2), put(out, 0, 2), put(out, e.deflate ? 8 : 0, 2), put(out, 0, 4);
-    put(out, crc, 4), put(out, body.size(), 4), put(out, e.data.size(), 4);
-    put(out, e.name.size(), 2), put(out, 0, 2);
-    out += e.name + body;
-    std::string extra;
-    if (e.zip64)
-      put(extra, 1, 2), put(extra, 24, 2), put(extra, e.data.size(), 8), put(extra, body.size(), 8),
-          put(extra, offset, 8);
-    put(directory, 0x02014b50, 4), put(directory, 45, 2), put(directory, 20, 2), put(directory, 0, 2);
-    put(directory, e.deflate ? 8 : 0, 2), put(directory, 0, 4), put(directory, crc, 4);
-    const uint64_t saturated = 0xffffffffu;
-    put(directory, e.zip64 ? saturated : body.size(), 4),
-        put(directory, e.zip64 ? saturated : e.data.size(), 4);
-    put(directory, e.name.size(), 2), put(directory, extra.size(), 2), put(directory, 0, 2);
-    put(directory, 0, 2), put(directory, 0, 2), put(directory, 0, 4),
-        put(directory, e.zip64 ? saturated : offset, 4);
-    directory += e.name + extra;
-  }
-  const uint64_t directory_offset = out.size();
-  out += directory;
-  put(out, 0x06054b50, 4), put(out, 0, 4), put(out, entries.size(), 2), put(out, entries.size(), 2);
-  put(out, directory.size(), 4), put(out, directory_offset, 4), put(out, 0, 2);
-  return out;
-}
+using testing::Entry;
+using testing::zip_of;
 
 std::string payload(std::size_t n, uint32_t seed) {
   std::mt19937 rng(seed);

@@ -1,4 +1,4 @@
-// TriangleSource: every scene input (OBJ file, PLY file, procedural generator)
+// TriangleSource: every scene input (OBJ, PLY or .npz file, procedural generator)
 // streams its triangles through this one interface, in primitive-id order, in
 // batches, so that memory does not grow with the input's size. TriangleSink is
 // the receiving end (the packer, a test, `outcore info` of an input).
@@ -35,6 +35,14 @@ struct SourceOptions {
   uint64_t vertex_memory_bytes = 0;
   // Where out-of-core readers keep their temporary files; empty: $TMPDIR or /tmp.
   std::string temp_dir;
+};
+
+// What a source may hold in memory for its lifetime (gen:city's welded base
+// mesh, an .npz input's mesh: TriangleSource::held_memory_bytes()); the
+// defaults mean no limit.
+struct HeldMemoryLimit {
+  uint64_t bytes = 0;  // 0: no limit
+  std::string origin;  // where the limit comes from, for messages ("half of --mem-mb 1024")
 };
 
 class TriangleSink {

@@ -14,7 +14,7 @@ Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string
     generator_options.mesh_memory_origin = held.origin;
     return make_generator(spec, generator_options);
   }
-  return open_triangle_file(spec, options);
+  return open_triangle_file(spec, options, held);
 }
 
 }  // namespace outcore

@@ -15,15 +15,8 @@
 
 namespace outcore {
 
-// What a source may hold in memory for its lifetime (gen:city's welded base
-// mesh, TriangleSource::held_memory_bytes()); the defaults mean no limit.
-struct HeldMemoryLimit {
-  uint64_t bytes = 0;  // 0: no limit
-  std::string origin;  // where the limit comes from, for messages ("half of --mem-mb 1024")
-};
-
 // options reach the file readers (memory for vertices, temporary directory),
-// held the generators.
+// held the generators and the .npz reader (HeldMemoryLimit, triangle_source.h).
 Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string& spec,
                                                                const SourceOptions& options = {},
                                                                const HeldMemoryLimit& held = {});

@@ -18,11 +18,14 @@ Status PackInputs::open(const SourceOptions& file_options) {
   const std::string origin = "half of --mem-mb " + std::to_string(options.memory_mb);
   for (const std::string& spec : options.inputs) {
     OUTCORE_RETURN_IF_ERROR(context_.check_cancel());
-    // Bases of several cities are held at once, so each gets what is left (a
-    // held base never exceeds the limit it was read under: at least 1 is left).
+    // Bases of several cities and .npz meshes are held at once, so each gets
+    // what is left (a held mesh never exceeds the limit it was read under: at
+    // least 1 is left).
     HeldMemoryLimit held;
     held.bytes = std::max<uint64_t>(1, allowance - memory.generator_meshes);
-    held.origin = memory.generator_meshes == 0 ? origin : "what the earlier gen:city bases left of " + origin;
+    held.origin = memory.generator_meshes == 0
+                      ? origin
+                      : "what the meshes of earlier inputs (gen:city bases, .npz files) left of " + origin;
     auto source = open_triangle_source(spec, file_options, held);
     if (!source.ok()) return source.status();
     memory.generator_meshes += (*source)->held_memory_bytes();

@@ -21,7 +21,7 @@ class PackInputs {
  public:
   explicit PackInputs(PackContext& context) : context_(context) {}
 
-  // Opens every input; generators' lifetime meshes are added to the memory
+  // Opens every input; lifetime meshes (gen:city bases, .npz meshes) are added to the memory
   // plan (context.memory.generator_meshes), within half of the budget.
   Status open(const SourceOptions& file_options);
   // One RangeEmitter per input when every input has one (generated scenes),

@@ -32,8 +32,8 @@ struct MemoryPlan {
   // pipeline's per-token chunk buffers, and each cell's subgroup.
   uint64_t chunk_table = 0;
   uint64_t filter_buffers = 0;
-  // Meshes generators hold for their lifetime (gen:city's base), at most
-  // half of the budget (PackInputs::open).
+  // Meshes inputs hold for their lifetime (gen:city's base, an .npz file's
+  // mesh), at most half of the budget (PackInputs::open).
   uint64_t generator_meshes = 0;
 
   uint64_t reserved() const {

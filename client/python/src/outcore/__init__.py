@@ -8,12 +8,31 @@ with Open3D RaycastingScene-style results.
         hit = scene.test_occlusions(rays)    # (...,) bool
         o = outcore.spawn_origins(rays, ans) # (..., 3) origins for secondary rays
 
+    rays = outcore.create_rays_pinhole(60, center, eye, up, 640, 480)  # Open3D's camera rays
+    outcore.pack(vertices, triangles, "scene.oc")                       # a store from arrays
+    image = outcore.render(scene, eye=eye, center=center, up=up, fov_deg=60, width=640, height=480)
+    outcore.write_png("depth.png", image)
+
 See docs/PYTHON.md in the repository.
 """
 
 from .client import INVALID_ID, SceneClient
 from .errors import OutcoreError
+from .pack import PackError, pack
+from .pinhole import create_rays_pinhole
+from .png import write_png
+from .render import render
 from .spawn import spawn_origins
 
-__all__ = ["SceneClient", "OutcoreError", "INVALID_ID", "spawn_origins"]
+__all__ = [
+    "SceneClient",
+    "OutcoreError",
+    "INVALID_ID",
+    "spawn_origins",
+    "create_rays_pinhole",
+    "pack",
+    "PackError",
+    "render",
+    "write_png",
+]
 __version__ = "0.1.0"
