@@ -2,8 +2,9 @@
 
 #include <zlib.h>
 
-#include <cstdio>
-#include <memory>
+#include <string_view>
+
+#include "core/util/atomic_file.h"
 
 namespace outcore {
 namespace {
@@ -67,12 +68,8 @@ Expected<std::vector<uint8_t>> encode_png(uint32_t width, uint32_t height, std::
 
 Status write_png(const std::string& path, uint32_t width, uint32_t height, std::span<const uint8_t> rgb) {
   OUTCORE_ASSIGN_OR_RETURN(std::vector<uint8_t> png, encode_png(width, height, rgb));
-  std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "wb"), &std::fclose);
-  if (!file) return io_error_from_errno("cannot create " + path);
-  if (std::fwrite(png.data(), 1, png.size(), file.get()) != png.size())
-    return io_error_from_errno("cannot write " + path);
-  if (std::fclose(file.release()) != 0) return io_error_from_errno("cannot write " + path);
-  return Status::Ok();
+  const std::string_view parts[] = {std::string_view(reinterpret_cast<const char*>(png.data()), png.size())};
+  return write_file_atomically(path, parts);
 }
 
 }  // namespace outcore
