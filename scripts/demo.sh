@@ -81,9 +81,8 @@ echo
 echo "== outcore render --server (a depth picture of the city, rays made and coloured here, traced by the server)"
 # The camera: low over a part of the city where the icospheres stand above
 # the terrain (elsewhere the terrain's hills hide most of them), looking
-# along the ground. --up is Open3D's: rows go along it, so the world's down
-# (-y) gives an upright picture.
-"$bin" render --server "$address" --eye=-60,22,-50 --center=-125,0,-135 --up=0,-1,0 --fov 60 \
+# along the ground; --up is the world's up (y).
+"$bin" render --server "$address" --eye=-60,22,-50 --center=-125,0,-135 --up=0,1,0 --fov 60 \
   --size 1280x720 --mode depth -o "$work/demo-city.png"
 echo "depth picture of the city: $work/demo-city.png"
 echo

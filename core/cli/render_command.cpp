@@ -80,6 +80,11 @@ Expected<PinholeRays> camera_of(const RenderArgs& args) {
   camera.width = size.width;
   camera.height = size.height;
   camera.fov_deg = args.fov_deg;
+  // Checked as the user gave it (errors name their --up). --up is the
+  // world's up (an upright picture); Open3D's camera runs its rows along
+  // its `up`, so the rays are asked with the world's down.
+  OUTCORE_RETURN_IF_ERROR(PinholeRays::make(camera).status());
+  camera.up = -camera.up;
   return PinholeRays::make(camera);
 }
 
@@ -178,8 +183,8 @@ void add_render_command(CLI::App& app, int& exit_code, ConnectRenderServer conne
   cmd->add_option("--eye", args->eye, "Camera position X,Y,Z")->required();
   cmd->add_option("--center", args->center, "Point looked at X,Y,Z")->required();
   cmd->add_option("--up", args->up,
-                  "Camera up X,Y,Z as Open3D's create_rays_pinhole takes it: rows go along it, so row 0 "
-                  "(the top of the picture) looks towards -up; give the world's down for an upright picture")
+                  "The world's up X,Y,Z: the picture is upright (the rays are Open3D's "
+                  "create_rays_pinhole with -up, whose rows run along its up)")
       ->required();
   cmd->add_option("--fov", args->fov_deg, "Horizontal field of view, degrees, in (0, 180)")->required();
   cmd->add_option("--size", args->size, "Image size WIDTHxHEIGHT in pixels, e.g. 640x480")->required();

@@ -14,8 +14,8 @@
 // - the camera's y axis is `up` (made orthogonal to the view direction) and
 //   rows go along it: row 0 looks towards -up and column 0 towards
 //   up x view. Written top row first, a picture whose `up` is the world's up
-//   is therefore upside down and mirrored (turned by 180 degrees); giving the
-//   world's down as `up` shows it upright.
+//   is therefore upside down and mirrored (turned by 180 degrees); `outcore
+//   render` asks for the world's down so that its pictures are upright.
 // Rays are made in rows, row 0 first (the H x W layout of Open3D's tensor).
 //
 // Thread-safety: PinholeRays is immutable after make(); rows() may be called

@@ -52,7 +52,8 @@ def id_colour(geometry_id: int) -> tuple[int, int, int]:
 
 
 def geometry_of(client) -> np.ndarray:
-    rays = outcore.create_rays_pinhole(CAMERA["fov_deg"], CAMERA["center"], CAMERA["eye"], CAMERA["up"],
+    # The picture's rays: Open3D's camera asked with the world's down (render's rule).
+    rays = outcore.create_rays_pinhole(CAMERA["fov_deg"], CAMERA["center"], CAMERA["eye"], -np.array(CAMERA["up"]),
                                        CAMERA["width"], CAMERA["height"])
     return np.asarray(client.cast_rays(rays)["geometry_ids"]).astype(np.int64)
 
@@ -97,13 +98,12 @@ def test_ids_colour_each_geometry_by_splitmix64_of_its_id(client):
         assert np.all(image[geometry == g] == colours[g]), g
 
 
-def test_pixels_are_laid_out_as_open3ds_rays(client):
-    # Open3D's fov camera: row 0 looks towards -up, column 0 towards the
-    # camera's right (+x here), so the marker at +x +y is in the later rows
-    # and the earlier columns.
+def test_the_picture_is_upright_with_the_worlds_up(client):
+    # Looking down -z with y up, the marker at +x +y is in the top rows and
+    # the right columns, as a photograph shows it.
     geometry = geometry_of(client)
     rows, columns = np.nonzero(geometry == 2)
-    assert rows.min() >= 15 and columns.max() < 20
+    assert rows.max() < 15 and columns.min() >= 20
     image = outcore.render(client, **CAMERA, mode="ids")
     assert np.all(image[rows, columns] == id_colour(2))
 

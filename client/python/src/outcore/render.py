@@ -1,14 +1,13 @@
 """outcore.render: a picture of a served scene from a pinhole camera, in
 three modes, with the same colour rules as the C++ `outcore render`.
 
-The rays are create_rays_pinhole(fov_deg, center, eye, up, width, height)
-(Open3D's camera, outcore/pinhole.py), cast with client.cast_rays; pixel
-(row y, column x) of the image is the ray at [y, x] of those rays, exactly
-as Open3D users get from imshow(ans["t_hit"]). Open3D's fov form puts
-`up` towards the LAST row and column 0 towards the camera's right, so with
-the world's up as `up` the picture is turned 180 degrees: give the world's
-down as `up` for an upright picture (as for the C++ `outcore render --up`),
-or turn it with image[::-1, ::-1].
+`up` is the world's up: the picture is upright and unmirrored, as a
+photograph. Open3D's fov camera runs its rows along `up` (row 0 looks
+towards -up, column 0 towards the camera's right), so the rays are
+create_rays_pinhole(fov_deg, center, eye, -up, width, height) (Open3D's
+camera, outcore/pinhole.py), cast with client.cast_rays, and pixel (row y,
+column x) is the ray at [y, x] of those rays; the C++ `outcore render` does
+the same.
 
 Colour rules (hits_to_image), all arithmetic in float64, every channel
 rounded to nearest with halves away from zero and clamped to 0..255:
@@ -59,7 +58,11 @@ def render(client, *, eye, center, up, fov_deg, width, height, mode: str = "dept
         raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     width = _pixels(width, "width")
     height = _pixels(height, "height")
-    rays = create_rays_pinhole(fov_deg, center, eye, up, width, height)
+    try:
+        down = -np.asarray(up, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"up must be 3 finite numbers, got {up!r}") from None
+    rays = create_rays_pinhole(fov_deg, center, eye, down, width, height)
     return hits_to_image(client.cast_rays(rays), mode)
 
 
