@@ -12,7 +12,8 @@ Open3D likewise (after a one-element call that builds its BVH). Rays: the
 scene's incoherent rays (bench/make_rays.py); points: uniform in the scene's
 box grown by 10 % of its size. Answers are checked: counts equal on >= 99.9 %
 of rays (the rest: edge grazes, where float tests may rightly differ),
-distances within 1e-5 relative of Open3D's.
+distances within 1e-5 of the scene's diagonal of Open3D's (Open3D
+computes in float32).
 
 Writes rows as JSON (--json) and a bar chart of the ratios as PNG (--png).
 Usage: .venv-bench/bin/python bench/open3d_queries_bench.py [--runs 5] [--scenes bunny,city]
@@ -51,7 +52,7 @@ def bench_scene(name, args):
     rays6 = np.ascontiguousarray(rays[:, :6])
     with open(info_path) as f:
         info = json.load(f)
-    lo, hi = np.array(info["bounds_lo"]), np.array(info["bounds_hi"])
+    lo, hi = np.array(info["bounds"]["min"]), np.array(info["bounds"]["max"])
     grow = 0.1 * (hi - lo)
     points = np.random.default_rng(1).uniform(lo - grow, hi + grow, (args.points, 3)).astype(np.float32)
     tris, _ = read_store_triangles(store)
@@ -75,7 +76,7 @@ def bench_scene(name, args):
                 print(f"{name} {call}", flush=True)
                 ours_s, ours_r = timed(ours, args.runs)
                 theirs_s, theirs_r = timed(theirs, args.runs)
-                check = check_answers(call, ours_r, theirs_r)
+                check = check_answers(call, ours_r, theirs_r, float(np.linalg.norm(hi - lo)))
                 rows.append({"scene": name, "call": call, "items": n, "outcore_s": ours_s, "open3d_s": theirs_s,
                              "ratio": theirs_s / ours_s, "check": check})
                 print(f"  outcore {ours_s:.3f} s, open3d {theirs_s:.3f} s, ratio {theirs_s / ours_s:.2f} ({check})",
@@ -85,7 +86,7 @@ def bench_scene(name, args):
     return rows
 
 
-def check_answers(call, ours, theirs):
+def check_answers(call, ours, theirs, diagonal):
     if call == "count_intersections":
         same = float(np.mean(ours == theirs))
         if same < 0.999:
@@ -99,10 +100,12 @@ def check_answers(call, ours, theirs):
     if call == "compute_closest_points":
         d = np.linalg.norm(ours["points"] - theirs["points"].numpy(), axis=1)
         return f"closest points within {float(d.max()):.2e} of Open3D's"
-    rel = np.abs(ours - theirs) / np.maximum(theirs, 1e-12)
-    if float(rel.max()) > 1e-5:
-        sys.exit(f"{call}: distances differ from Open3D's by up to {float(rel.max()):.2e} relative")
-    return f"max relative difference {float(rel.max()):.2e}"
+    # Open3D works in float32: its distances are off by rounding at the
+    # scene's scale, so the difference is judged against the scene's size.
+    gap = float(np.max(np.abs(ours.astype(np.float64) - theirs)))
+    if gap > 1e-5 * diagonal:
+        sys.exit(f"{call}: distances differ from Open3D's by up to {gap:.2e} (scene diagonal {diagonal:.3g})")
+    return f"max difference {gap:.2e} ({gap / diagonal:.1e} of the scene's diagonal)"
 
 
 def draw(rows, path):

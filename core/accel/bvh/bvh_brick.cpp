@@ -1,6 +1,5 @@
 #include "core/accel/bvh/bvh_brick.h"
 
-#include "core/accel/bvh/scalar_triangle_test_dispatch.h"
 #include "core/accel/bvh/wide_bvh_queries.h"
 
 #include <algorithm>
@@ -99,7 +98,7 @@ void BvhBrickAccel::occluded(std::span<const uint32_t> ray_ids, const Ray* rays,
 
 void BvhBrickAccel::all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
                              std::vector<RayHitRecord>& out) const {
-  with_scalar_triangle_test(test_, [&]<class Test>() { wide_bvh_all_hits<Test>(view_, ray_ids, rays, out); });
+  wide_bvh_all_hits(active_simd_path(), test_, view_, ray_ids, rays, out);
 }
 
 void BvhBrickAccel::closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,

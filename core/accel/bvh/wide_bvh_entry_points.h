@@ -44,6 +44,12 @@ void occluded_tree(TriangleTest test, const WideBvhView& tree, std::span<const u
 }
 
 template <class V>
+void all_hits_tree(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
+                   const Ray* rays, std::vector<RayHitRecord>& out) {
+  with_lanes<V>(test, [&]<class Lanes>() { all_hits_rays<V, Lanes>(tree, ray_ids, rays, out); });
+}
+
+template <class V>
 void intersect_brick_set(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
                          const Ray* rays, Hit* hits) {
   if (test == TriangleTest::kWatertight) return intersect_watertight_coherent<V>(set, ray_ids, rays, hits);

@@ -36,6 +36,7 @@
 #include "core/accel/bvh/simd_lanes.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
 #include "core/accel/bvh/wide_bvh.h"
+#include "core/accel/bvh/wide_bvh_trace.h"
 #include "core/ray/query_types.h"
 #include "core/ray/ray_types.h"
 
@@ -493,6 +494,38 @@ class AnyHitSearch {
   Lanes lanes_;
   float tmax_;
 };
+
+// Every hit of one ray in (tnear, tfar]: the any-hit walk that never stops
+// and never shortens the segment; each hit goes to append_hit (defined
+// outside the SIMD-targeted files, wide_bvh_trace.h).
+template <class V, class Lanes>
+void all_hits_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
+                   std::vector<RayHitRecord>& out) {
+  const TrianglePacket* packets = tree.packets.data();
+  for (const uint32_t i : ray_ids) {
+    const Ray& ray = rays[i];
+    float tmax = ray.tfar;
+    if (!(tmax > ray.tnear)) continue;
+    const BoxLanes<V> box(ray);
+    Lanes lanes(ray);
+    traverse(tree, box, ray.tnear, tmax, [&](uint32_t first, uint32_t count, float& limit) {
+      for_each_lane_group<V>(packets, first, count,
+                             [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
+                               for (uint32_t bits = lanes.candidates(packet, lane, valid, ray.tnear, limit);
+                                    bits != 0; bits &= bits - 1) {
+                                 const auto bit = static_cast<uint32_t>(__builtin_ctz(bits));
+                                 TriangleHit h;
+                                 if (!lanes.accept(packet, lane, bit, h)) continue;
+                                 append_hit(out, i,
+                                            {h.t, packet.geometry_id[lane + bit], packet.primitive_id[lane + bit],
+                                             h.u, h.v, packet.triangle(lane + bit).unit_normal()});
+                               }
+                               return false;
+                             });
+      return false;
+    });
+  }
+}
 
 template <class V, class Lanes>
 void intersect_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {

@@ -1,13 +1,8 @@
-// The bvh brick's every-hit and closest-point queries (brick_queries.h) as
-// walks of its wide tree: a ray's walk tests every child box its segment
-// meets and never shortens the segment; a point's walk visits children
-// nearest first and skips a box farther than the best point so far (<=, so
-// a tie with a smaller id is still found). Scalar and one ray or point at a
-// time: these queries are rarer than closest hits, and exactness comes first.
-//
-// Box tests are in float64 on boxes grown by kBoxSlack of their coordinates'
-// magnitude (16 float ulps and more), so a triangle the test hits is never
-// culled by rounding.
+// The bvh brick's closest-point query (brick_queries.h) as a walk of its
+// wide tree: children nearest first, a box farther than the best point so
+// far skipped (<=, so a tie with a smaller id is still found); distances in
+// float64. Scalar, one point at a time. (Every hit runs on the SIMD kernels:
+// wide_bvh_kernels.h, all_hits_rays.)
 //
 // Thread-safety: pure functions over an immutable view.
 #pragma once
@@ -25,39 +20,8 @@ namespace outcore {
 
 namespace wide_bvh_queries_detail {
 
-inline constexpr double kBoxSlack = 1.0 / (1 << 20);
 // Every child of a node may be pushed: 7 waiting per level at most.
 inline constexpr uint32_t kStackSize = kMaxBvhDepth * (kWideBvhWidth - 1) + 1;
-
-struct RaySegment {
-  double origin[3], inverse[3], direction[3];
-  double tnear, tfar;
-
-  explicit RaySegment(const Ray& ray) : tnear(ray.tnear), tfar(ray.tfar) {
-    for (int a = 0; a < 3; ++a) {
-      origin[a] = ray.origin[a];
-      direction[a] = ray.direction[a];
-      inverse[a] = 1.0 / direction[a];
-    }
-    tfar += std::abs(tfar) * kBoxSlack;
-  }
-  bool meets(const WideBvhNode& node, uint32_t k) const {
-    double lo_t = tnear, hi_t = tfar;
-    for (int a = 0; a < 3; ++a) {
-      const double lo = node.lo[a][k], hi = node.hi[a][k];
-      const double pad = (std::abs(lo) + std::abs(hi)) * kBoxSlack + 1e-30;
-      if (direction[a] == 0) {
-        if (origin[a] < lo - pad || origin[a] > hi + pad) return false;
-        continue;
-      }
-      double t0 = (lo - pad - origin[a]) * inverse[a], t1 = (hi + pad - origin[a]) * inverse[a];
-      if (t0 > t1) std::swap(t0, t1);
-      lo_t = std::max(lo_t, t0);
-      hi_t = std::min(hi_t, t1);
-    }
-    return lo_t <= hi_t;
-  }
-};
 
 // Calls fn(triangle, geometry_id, primitive_id) for each triangle of leaf
 // child k of `node` (padding slots skipped).
@@ -72,38 +36,6 @@ void for_each_leaf_triangle(const WideBvhView& tree, const WideBvhNode& node, ui
 }
 
 }  // namespace wide_bvh_queries_detail
-
-template <class Test>
-void wide_bvh_all_hits(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
-                       std::vector<RayHitRecord>& out) {
-  using namespace wide_bvh_queries_detail;
-  if (tree.nodes.empty()) return;
-  uint32_t stack[kStackSize];
-  for (const uint32_t i : ray_ids) {
-    const Ray& ray = rays[i];
-    const typename Test::Prepared prepared = Test::prepare(ray);
-    const RaySegment segment(ray);
-    uint32_t size = 0;
-    stack[size++] = 0;
-    while (size > 0) {
-      const WideBvhNode& node = tree.nodes[stack[--size]];
-      for (uint32_t k = 0; k < kWideBvhWidth; ++k) {
-        const uint8_t bit = uint8_t{1} << k;
-        if ((node.child_mask() & bit) == 0 || !segment.meets(node, k)) continue;
-        if ((node.inner_mask & bit) != 0) {
-          stack[size++] = node.child[k];
-          continue;
-        }
-        for_each_leaf_triangle(tree, node, k,
-                               [&](const Triangle& tri, uint32_t geometry, uint32_t primitive) {
-                                 TriangleHit found;
-                                 if (Test::hit(prepared, tri, ray.tnear, ray.tfar, found))
-                                   out.push_back({i, hit_of(found, geometry, primitive, tri.unit_normal())});
-                               });
-      }
-    }
-  }
-}
 
 inline void wide_bvh_closest_points(const WideBvhView& tree, std::span<const uint32_t> point_ids,
                                     const Vec3f* points, ClosestPoint* best) {

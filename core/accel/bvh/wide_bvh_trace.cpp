@@ -58,6 +58,17 @@ void wide_bvh_occluded(SimdPath path, TriangleTest test, const WideBvhView& tree
   wide_sse4::occluded(test, tree, ray_ids, rays, occluded);
 }
 
+void wide_bvh_all_hits(SimdPath path, TriangleTest test, const WideBvhView& tree,
+                       std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out) {
+  if (tree.nodes.empty()) return;
+  if (path == SimdPath::kAvx2) return wide_avx2::all_hits(test, tree, ray_ids, rays, out);
+  wide_sse4::all_hits(test, tree, ray_ids, rays, out);
+}
+
+void append_hit(std::vector<RayHitRecord>& out, uint32_t ray, const Hit& hit) {
+  out.push_back({ray, hit});
+}
+
 void wide_bvh_set_intersect(SimdPath path, TriangleTest test, const WideBvhSetView& set,
                             std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
   if (set.trees.empty()) return;

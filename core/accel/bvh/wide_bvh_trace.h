@@ -14,7 +14,9 @@
 #include <cstdint>
 #include <span>
 #include <string_view>
+#include <vector>
 
+#include "core/accel/brick_queries.h"
 #include "core/accel/bvh/triangle_test_kind.h"
 #include "core/accel/bvh/wide_bvh.h"
 #include "core/ray/query_types.h"
@@ -44,6 +46,14 @@ void wide_bvh_intersect(SimdPath path, TriangleTest test, const WideBvhView& tre
 void wide_bvh_occluded(SimdPath path, TriangleTest test, const WideBvhView& tree,
                        std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded);
 
+// Every hit of each ray in (tnear, tfar], appended to `out` ray by ray
+// (brick_queries.h).
+void wide_bvh_all_hits(SimdPath path, TriangleTest test, const WideBvhView& tree,
+                       std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out);
+// Appends one record: the every-hit kernels call it, so that no std::vector
+// code is compiled inside the SIMD-targeted files (wide_bvh_trace_avx2.cpp).
+void append_hit(std::vector<RayHitRecord>& out, uint32_t ray, const Hit& hit);
+
 // The same over a set of trees, as if they were one.
 void wide_bvh_set_intersect(SimdPath path, TriangleTest test, const WideBvhSetView& set,
                             std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits);
@@ -53,6 +63,8 @@ void wide_bvh_set_occluded(SimdPath path, TriangleTest test, const WideBvhSetVie
 namespace wide_sse4 {
 void intersect(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
                Hit* hits);
+void all_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
+              std::vector<RayHitRecord>& out);
 void occluded(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
               uint8_t* occluded);
 void set_intersect(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
@@ -63,6 +75,8 @@ void set_occluded(TriangleTest test, const WideBvhSetView& set, std::span<const 
 namespace wide_avx2 {
 void intersect(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
                Hit* hits);
+void all_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
+              std::vector<RayHitRecord>& out);
 void occluded(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
               uint8_t* occluded);
 void set_intersect(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,

@@ -32,6 +32,11 @@ void occluded(TriangleTest test, const WideBvhView& tree, std::span<const uint32
   wide_kernels::occluded_tree<V>(test, tree, ray_ids, rays, occluded);
 }
 
+void all_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
+              std::vector<RayHitRecord>& out) {
+  wide_kernels::all_hits_tree<V>(test, tree, ray_ids, rays, out);
+}
+
 void set_intersect(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
                    const Ray* rays, Hit* hits) {
   wide_kernels::intersect_brick_set<V>(test, set, ray_ids, rays, hits);
