@@ -577,16 +577,19 @@ class SceneClient:
         chunks that fit a message (halved when a list does not)."""
         name, response = ("ListIntersections", pb.ListResponse) if listing else \
             ("CountIntersections", pb.CountResponse)
-        call = self._plain_call(name, pb.QueryRequest, response)
-        layout = pb.RAY_LAYOUT_F32X8 if flat.shape[1] == 8 else pb.RAY_LAYOUT_F32X6
+        # Requests serialised by _wire (one copy of the rays, no message object).
+        path = f"/{_SERVICE}/{name}"
+        call = self._plain_calls.get(path)
+        if call is None:
+            call = self._channel.unary_unary(path, response_deserializer=response.FromString)
+            self._plain_calls[path] = call
         n = flat.shape[0]
         chunk = max(1, min(n, (self._max_message_bytes - _MESSAGE_MARGIN) // (flat.shape[1] * 4), 1 << 18))
         counts, hits, stats = [], [], None
         start = 0
         while start < n:
             part = flat[start:start + chunk]
-            request = pb.QueryRequest(strict=strict, batch=pb.RayBatch(
-                layout_version=1, ray_layout=layout, ray_count=part.shape[0], rays=part.tobytes()))
+            request = _wire.encode_query(part, strict=strict)
             try:
                 reply = call(request, timeout=self.timeout)
             except grpc.RpcError as e:
