@@ -14,8 +14,8 @@
 #include "core/query/query_engine.h"
 #include "core/store/scene_packer.h"
 #include "tests/support/packed_scene.h"
-#include "tests/support/test_rays.h"
 #include "tests/support/test_paths.h"
+#include "tests/support/test_rays.h"
 
 namespace outcore {
 namespace {

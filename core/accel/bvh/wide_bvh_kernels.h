@@ -509,19 +509,19 @@ void all_hits_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, c
     const BoxLanes<V> box(ray);
     Lanes lanes(ray);
     traverse(tree, box, ray.tnear, tmax, [&](uint32_t first, uint32_t count, float& limit) {
-      for_each_lane_group<V>(packets, first, count,
-                             [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
-                               for (uint32_t bits = lanes.candidates(packet, lane, valid, ray.tnear, limit);
-                                    bits != 0; bits &= bits - 1) {
-                                 const auto bit = static_cast<uint32_t>(__builtin_ctz(bits));
-                                 TriangleHit h;
-                                 if (!lanes.accept(packet, lane, bit, h)) continue;
-                                 append_hit(out, i,
-                                            {h.t, packet.geometry_id[lane + bit], packet.primitive_id[lane + bit],
-                                             h.u, h.v, packet.triangle(lane + bit).unit_normal()});
-                               }
-                               return false;
-                             });
+      for_each_lane_group<V>(
+          packets, first, count, [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
+            for (uint32_t bits = lanes.candidates(packet, lane, valid, ray.tnear, limit); bits != 0;
+                 bits &= bits - 1) {
+              const auto bit = static_cast<uint32_t>(__builtin_ctz(bits));
+              TriangleHit h;
+              if (!lanes.accept(packet, lane, bit, h)) continue;
+              append_hit(out, i,
+                         {h.t, packet.geometry_id[lane + bit], packet.primitive_id[lane + bit], h.u, h.v,
+                          packet.triangle(lane + bit).unit_normal()});
+            }
+            return false;
+          });
       return false;
     });
   }
