@@ -51,6 +51,8 @@ import numpy as np
 
 from . import _shared, _wire
 from ._rays import as_wire_rays
+from ._messages import message_to_dict as _message_to_dict
+from ._open3d_queries import Open3dQueries, _check_nthreads
 from .errors import OutcoreError, from_rpc_error
 from .v1 import scene_query_pb2 as pb
 
@@ -131,57 +133,6 @@ def _refused(error: grpc.RpcError) -> bool:
     return any((key, value) == _SHARED_REFUSED for key, value in trailers)
 
 
-def _message_to_dict(message) -> dict:
-    """A protobuf message as plain Python values (ints stay ints, unlike
-    json_format, which turns uint64 into strings)."""
-    out = {}
-    for field in message.DESCRIPTOR.fields:
-        value = getattr(message, field.name)
-        if field.type == field.TYPE_MESSAGE and field.message_type.GetOptions().map_entry:
-            value = dict(value)
-        elif field.type == field.TYPE_MESSAGE:
-            if field.is_repeated:
-                value = [_message_to_dict(v) for v in value]
-            else:
-                value = _message_to_dict(value)
-        elif field.is_repeated:
-            value = list(value)
-        elif field.enum_type is not None:
-            value = field.enum_type.values_by_number[value].name
-        out[field.name] = value
-    return out
-
-
-# QueryPoints' CLOSEST record (proto "Point queries").
-_CLOSEST_DTYPE = np.dtype([("point", "<f4", (3,)), ("geometry_id", "<u4"), ("primitive_id", "<u4"),
-                           ("uv", "<f4", (2,)), ("normal", "<f4", (3,)), ("distance", "<f4")])
-assert _CLOSEST_DTYPE.itemsize == 44
-
-
-def _check_nthreads(nthreads) -> None:
-    if isinstance(nthreads, bool) or not isinstance(nthreads, (int, np.integer)) or nthreads < 0:
-        raise ValueError(f"nthreads must be an int >= 0 (it is ignored: the server decides), got {nthreads!r}")
-
-
-def _check_nsamples(nsamples) -> None:
-    if isinstance(nsamples, bool) or not isinstance(nsamples, (int, np.integer)) or nsamples < 1 \
-            or nsamples % 2 == 0:
-        raise ValueError(f"nsamples must be an odd int >= 1, got {nsamples!r}")
-
-
-def _as_wire_points(points) -> tuple[np.ndarray, tuple[int, ...]]:
-    try:
-        arr = np.asarray(points)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"query_points must be an array of numbers of shape (..., 3): {e}") from None
-    if arr.dtype.kind not in "fiu":
-        raise ValueError(f"query_points must have a real numeric dtype (float32 preferred), got dtype {arr.dtype}")
-    if arr.ndim < 1 or arr.shape[-1] != 3:
-        raise ValueError(f"query_points must have shape (..., 3), got shape {arr.shape}")
-    flat = np.ascontiguousarray(arr, dtype="<f4").reshape(-1, 3)
-    return flat, tuple(arr.shape[:-1])
-
-
 def _rays_with_segment(rays, tnear, tfar) -> tuple[np.ndarray, tuple[int, ...]]:
     """Wire rays with tnear/tfar (test_occlusions' arguments) as columns 7-8."""
     flat, batch_shape = as_wire_rays(rays)
@@ -201,15 +152,6 @@ def _rays_with_segment(rays, tnear, tfar) -> tuple[np.ndarray, tuple[int, ...]]:
     return full, batch_shape
 
 
-def _add_stats(total: dict | None, part: dict) -> dict:
-    if total is None:
-        return part
-    for key, value in part.items():
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            total[key] = total.get(key, 0) + value
-    return total
-
-
 class _Query:
     """What differs between closest-hit and any-hit queries."""
 
@@ -223,7 +165,7 @@ _INTERSECT = _Query("Intersect", _wire.HIT_DTYPE)
 _OCCLUDED = _Query("Occluded", np.uint8)
 
 
-class SceneClient:
+class SceneClient(Open3dQueries):
     """A connection to `outcore serve`.
 
     address: "host:port" (gRPC target syntax). timeout: seconds allowed for
@@ -397,82 +339,6 @@ class SceneClient:
                                _OCCLUDED.unary)
         return occluded.view(np.bool_).reshape(batch_shape)
 
-    def count_intersections(self, rays, *, nthreads: int = 0, strict: bool = False) -> np.ndarray:
-        """How many triangles each ray hits in (tnear, tfar], each once, as
-        Open3D's count_intersections: an int32 array shaped like the batch
-        dims. Rays as cast_rays; the dynamic layer is not seen (OutcoreError
-        FAILED_PRECONDITION while it holds instances)."""
-        _check_nthreads(nthreads)
-        flat, batch_shape = as_wire_rays(rays)
-        counts, _ = self._every_hit(flat, strict, listing=False)
-        return counts.astype(np.int32).reshape(batch_shape)
-
-    def list_intersections(self, rays, *, nthreads: int = 0, strict: bool = False) -> dict:
-        """Every hit of every ray, as Open3D's list_intersections: a dict of
-        ray_splits ((N+1,) uint32: ray i's hits are [ray_splits[i],
-        ray_splits[i+1])), ray_ids (M,) uint32, geometry_ids and primitive_ids
-        (M,) uint32, primitive_uvs (M, 2) float32 and t_hit (M,) float32, for
-        N rays in C order of the batch dims; each ray's hits sorted by t, then
-        ids. Rays as cast_rays."""
-        _check_nthreads(nthreads)
-        flat, _ = as_wire_rays(rays)
-        counts, hits = self._every_hit(flat, strict, listing=True)
-        splits = np.zeros(counts.size + 1, dtype=np.uint32)
-        np.cumsum(counts, out=splits[1:])
-        return {
-            "ray_splits": splits,
-            "ray_ids": np.repeat(np.arange(counts.size, dtype=np.uint32), counts),
-            "geometry_ids": np.ascontiguousarray(hits["geometry_id"]),
-            "primitive_ids": np.ascontiguousarray(hits["primitive_id"]),
-            "primitive_uvs": np.ascontiguousarray(hits["uv"]),
-            "t_hit": np.ascontiguousarray(hits["t_hit"]),
-        }
-
-    def compute_closest_points(self, query_points, *, nthreads: int = 0, strict: bool = False) -> dict:
-        """The closest point of the scene to each query point, as Open3D's
-        compute_closest_points: a dict of points (..., 3) float32,
-        geometry_ids and primitive_ids (...,) uint32, primitive_uvs (..., 2)
-        and primitive_normals (..., 3) float32, shaped like the points' batch
-        dims. query_points: (..., 3) real numbers."""
-        _check_nthreads(nthreads)
-        records = self._points(query_points, pb.POINT_QUERY_CLOSEST, _CLOSEST_DTYPE, strict)
-        shape = records.shape
-        return {
-            "points": np.ascontiguousarray(records["point"]).reshape(shape + (3,)),
-            "geometry_ids": np.ascontiguousarray(records["geometry_id"]),
-            "primitive_ids": np.ascontiguousarray(records["primitive_id"]),
-            "primitive_uvs": np.ascontiguousarray(records["uv"]).reshape(shape + (2,)),
-            "primitive_normals": np.ascontiguousarray(records["normal"]).reshape(shape + (3,)),
-        }
-
-    def compute_distance(self, query_points, *, nthreads: int = 0, strict: bool = False) -> np.ndarray:
-        """Distance from each query point to the scene (float32, shaped like
-        the points' batch dims), as Open3D's compute_distance; computed in
-        float64 and rounded."""
-        _check_nthreads(nthreads)
-        return self._points(query_points, pb.POINT_QUERY_DISTANCE, np.dtype("<f4"), strict)
-
-    def compute_signed_distance(self, query_points, *, nthreads: int = 0, nsamples: int = 1,
-                                strict: bool = False) -> np.ndarray:
-        """compute_distance, negative inside (compute_occupancy), as Open3D's
-        compute_signed_distance. nsamples: accepted for Open3D's signature
-        (odd, >= 1); the server's parity rule retries rays that meet an edge
-        instead of voting over random ones (docs/REMOTE_API.md)."""
-        _check_nthreads(nthreads)
-        _check_nsamples(nsamples)
-        return self._points(query_points, pb.POINT_QUERY_SIGNED_DISTANCE, np.dtype("<f4"), strict)
-
-    def compute_occupancy(self, query_points, *, nthreads: int = 0, nsamples: int = 1,
-                          strict: bool = False) -> np.ndarray:
-        """1.0 for each query point inside the scene's closed surfaces, else
-        0.0 (float32, as Open3D's compute_occupancy), by the parity of the
-        surfaces a ray from the point crosses; exact on closed,
-        non-intersecting meshes (docs/REMOTE_API.md, "Point queries")."""
-        _check_nthreads(nthreads)
-        _check_nsamples(nsamples)
-        inside = self._points(query_points, pb.POINT_QUERY_OCCUPANCY, np.dtype("u1"), strict)
-        return inside.astype(np.float32)
-
     def scene_info(self) -> dict:
         """The served scene (GetSceneInfo) as a dict: store_path, triangle_count,
         brick_count, bounds_lo/bounds_hi (3 floats each), inputs (list of
@@ -562,78 +428,6 @@ class SceneClient:
         return reply.version
 
     # -- internals --------------------------------------------------------
-
-    def _plain_call(self, name: str, request_type, response_type):
-        path = f"/{_SERVICE}/{name}"
-        call = self._plain_calls.get(path)
-        if call is None:
-            call = self._channel.unary_unary(path, request_serializer=request_type.SerializeToString,
-                                             response_deserializer=response_type.FromString)
-            self._plain_calls[path] = call
-        return call
-
-    def _every_hit(self, flat: np.ndarray, strict: bool, listing: bool):
-        """Counts (n,) uint32 and, when listing, the hits (HIT_DTYPE), over
-        chunks that fit a message (halved when a list does not)."""
-        name, response = ("ListIntersections", pb.ListResponse) if listing else \
-            ("CountIntersections", pb.CountResponse)
-        # Requests serialised by _wire (one copy of the rays, no message object).
-        path = f"/{_SERVICE}/{name}"
-        call = self._plain_calls.get(path)
-        if call is None:
-            call = self._channel.unary_unary(path, response_deserializer=response.FromString)
-            self._plain_calls[path] = call
-        n = flat.shape[0]
-        chunk = max(1, min(n, (self._max_message_bytes - _MESSAGE_MARGIN) // (flat.shape[1] * 4), 1 << 18))
-        counts, hits, stats = [], [], None
-        start = 0
-        while start < n:
-            part = flat[start:start + chunk]
-            request = _wire.encode_query(part, strict=strict)
-            try:
-                reply = call(request, timeout=self.timeout)
-            except grpc.RpcError as e:
-                if listing and e.code() == grpc.StatusCode.RESOURCE_EXHAUSTED and chunk > 1:
-                    chunk = max(1, chunk // 4)
-                    continue
-                raise from_rpc_error(e, name) from None
-            if reply.ray_count != part.shape[0] or len(reply.counts) != 4 * part.shape[0]:
-                raise OutcoreError("DATA_LOSS", f"reply for {reply.ray_count} rays, sent {part.shape[0]}", name)
-            counts.append(np.frombuffer(reply.counts, dtype="<u4"))
-            if listing:
-                if len(reply.hits) != reply.hit_count * _wire.HIT_DTYPE.itemsize or \
-                        reply.hit_count != int(counts[-1].sum()):
-                    raise OutcoreError("DATA_LOSS", "list reply's hits do not match its counts", name)
-                hits.append(np.frombuffer(reply.hits, dtype=_wire.HIT_DTYPE))
-            stats = _add_stats(stats, _message_to_dict(reply.stats))
-            start += part.shape[0]
-        self.last_stats = stats
-        all_counts = np.concatenate(counts) if counts else np.zeros(0, np.uint32)
-        all_hits = np.concatenate(hits) if hits else np.zeros(0, _wire.HIT_DTYPE)
-        return all_counts, all_hits
-
-    def _points(self, query_points, kind, dtype: np.dtype, strict: bool) -> np.ndarray:
-        """Answers (..., 3) points with one record of `dtype` each, shaped
-        like the points' batch dims."""
-        flat, batch_shape = _as_wire_points(query_points)
-        call = self._plain_call("QueryPoints", pb.PointRequest, pb.PointResponse)
-        n = flat.shape[0]
-        chunk = max(1, min(n, (self._max_message_bytes - _MESSAGE_MARGIN) // max(12, dtype.itemsize), 1 << 18))
-        parts, stats = [], None
-        for start in range(0, n, chunk):
-            part = flat[start:start + chunk]
-            request = pb.PointRequest(layout_version=1, kind=kind, point_count=part.shape[0],
-                                      points=part.tobytes(), strict=strict)
-            reply = self._call_plain(call, request, "QueryPoints")
-            if reply.point_count != part.shape[0] or len(reply.answers) != part.shape[0] * dtype.itemsize:
-                raise OutcoreError("DATA_LOSS", f"reply for {reply.point_count} points, sent {part.shape[0]}",
-                                   "QueryPoints")
-            parts.append(np.frombuffer(reply.answers, dtype=dtype))
-            stats = _add_stats(stats, _message_to_dict(reply.stats))
-        self.last_stats = stats
-        out = np.concatenate(parts) if parts else np.zeros(0, dtype)
-        return out.reshape(batch_shape)
-
 
     def _call_plain(self, call, request, method: str):
         try:
