@@ -32,6 +32,14 @@ class BrickAccel {
   // per triangle, for each i in ray_ids (brick_queries.h).
   virtual void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
                         std::vector<RayHitRecord>& out) const = 0;
+  // Every hit counted only: adds to counts[i] the hits all_hits() would
+  // append for ray i. By default through all_hits(); a structure may count
+  // without making records.
+  virtual void count_hits(std::span<const uint32_t> ray_ids, const Ray* rays, uint32_t* counts) const {
+    std::vector<RayHitRecord> found;
+    all_hits(ray_ids, rays, found);
+    for (const RayHitRecord& r : found) ++counts[r.ray];
+  }
   // Closest point: for each i in point_ids, replaces best[i] when a triangle
   // of this brick is nearer to points[i] (closest_is_better).
   virtual void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,

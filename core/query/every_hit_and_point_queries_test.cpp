@@ -85,6 +85,10 @@ void expect_every_hit_matches_reference(const PackedScene& scene, QueryEngine& e
   std::vector<uint32_t> counts(rays.size());
   std::vector<RayHitRecord> records;
   ASSERT_TRUE(engine.all_hits(rays, counts, &records, options).ok());
+  // Counting alone (BrickAccel::count_hits) gives the listed counts.
+  std::vector<uint32_t> only_counts(rays.size());
+  ASSERT_TRUE(engine.all_hits(rays, only_counts, nullptr, options).ok());
+  EXPECT_EQ(only_counts, counts);
   std::size_t at = 0, checked = 0, hits = 0;
   for (std::size_t i = 0; i < rays.size(); ++i) {
     const std::size_t begin = at;

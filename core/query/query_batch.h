@@ -130,6 +130,17 @@ struct QueryBatch {
  private:
   uint64_t trace_all_hits(const BrickAccel& accel, std::span<const uint32_t> ids) const {
     uint64_t with_hit = 0;
+    if (collector == nullptr) {
+      // Counting only: no records.
+      for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
+        const std::span<const uint32_t> chunk = ids.subspan(from, std::min(kTraceChunk, ids.size() - from));
+        uint32_t before[kTraceChunk];
+        for (std::size_t k = 0; k < chunk.size(); ++k) before[k] = hit_counts[chunk[k]];
+        accel.count_hits(chunk, rays.data(), hit_counts);
+        for (std::size_t k = 0; k < chunk.size(); ++k) with_hit += hit_counts[chunk[k]] != before[k];
+      }
+      return ids.size() - with_hit;
+    }
     std::vector<RayHitRecord> found;
     for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
       found.clear();
@@ -139,7 +150,7 @@ struct QueryBatch {
         ++hit_counts[found[k].ray];
         with_hit += k == 0 || found[k].ray != found[k - 1].ray;
       }
-      if (collector != nullptr) collector->append(found);
+      collector->append(found);
     }
     return ids.size() - with_hit;
   }

@@ -43,6 +43,9 @@ class AutoBrickAccel final : public BrickAccel {
                 std::vector<RayHitRecord>& out) const override {
     inner_->all_hits(ray_ids, rays, out);
   }
+  void count_hits(std::span<const uint32_t> ray_ids, const Ray* rays, uint32_t* counts) const override {
+    inner_->count_hits(ray_ids, rays, counts);
+  }
   void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
                       ClosestPoint* best) const override {
     inner_->closest_points(point_ids, points, best);

@@ -101,6 +101,10 @@ void BvhBrickAccel::all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
   wide_bvh_all_hits(active_simd_path(), test_, view_, ray_ids, rays, out);
 }
 
+void BvhBrickAccel::count_hits(std::span<const uint32_t> ray_ids, const Ray* rays, uint32_t* counts) const {
+  wide_bvh_count_hits(active_simd_path(), test_, view_, ray_ids, rays, counts);
+}
+
 void BvhBrickAccel::closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
                                    ClosestPoint* best) const {
   wide_bvh_closest_points(view_, point_ids, points, best);

@@ -78,6 +78,7 @@ class BvhBrickAccel final : public BrickAccel {
   void occluded(std::span<const uint32_t> ray_ids, const Ray* rays, uint8_t* occluded) const override;
   void all_hits(std::span<const uint32_t> ray_ids, const Ray* rays,
                 std::vector<RayHitRecord>& out) const override;
+  void count_hits(std::span<const uint32_t> ray_ids, const Ray* rays, uint32_t* counts) const override;
   void closest_points(std::span<const uint32_t> point_ids, const Vec3f* points,
                       ClosestPoint* best) const override;
 

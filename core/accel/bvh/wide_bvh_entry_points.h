@@ -46,7 +46,15 @@ void occluded_tree(TriangleTest test, const WideBvhView& tree, std::span<const u
 template <class V>
 void all_hits_tree(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
                    const Ray* rays, std::vector<RayHitRecord>& out) {
-  with_lanes<V>(test, [&]<class Lanes>() { all_hits_rays<V, Lanes>(tree, ray_ids, rays, out); });
+  with_lanes<V>(test,
+                [&]<class Lanes>() { all_hits_rays<V, Lanes>(tree, ray_ids, rays, RecordEveryHit<V>{out}); });
+}
+
+template <class V>
+void count_hits_tree(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
+                     const Ray* rays, uint32_t* counts) {
+  with_lanes<V>(
+      test, [&]<class Lanes>() { all_hits_rays<V, Lanes>(tree, ray_ids, rays, CountEveryHit<V>{counts}); });
 }
 
 template <class V>

@@ -495,12 +495,30 @@ class AnyHitSearch {
   float tmax_;
 };
 
+// Where all_hits_rays puts each hit: a record (append_hit is defined
+// outside the SIMD-targeted files, wide_bvh_trace.h), or only a count.
+// Templates on the lane type, like every kernel here, so that each SIMD
+// file compiles its own copy under its own target.
+template <class V>
+struct RecordEveryHit {
+  std::vector<RayHitRecord>& out;
+  void operator()(uint32_t ray, const TrianglePacket& packet, uint32_t lane, const TriangleHit& h) const {
+    append_hit(out, ray,
+               {h.t, packet.geometry_id[lane], packet.primitive_id[lane], h.u, h.v,
+                packet.triangle(lane).unit_normal()});
+  }
+};
+template <class V>
+struct CountEveryHit {
+  uint32_t* counts;
+  void operator()(uint32_t ray, const TrianglePacket&, uint32_t, const TriangleHit&) const { ++counts[ray]; }
+};
+
 // Every hit of one ray in (tnear, tfar]: the any-hit walk that never stops
-// and never shortens the segment; each hit goes to append_hit (defined
-// outside the SIMD-targeted files, wide_bvh_trace.h).
-template <class V, class Lanes>
+// and never shortens the segment, each hit handed to `sink`.
+template <class V, class Lanes, class Sink>
 void all_hits_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
-                   std::vector<RayHitRecord>& out) {
+                   const Sink& sink) {
   const TrianglePacket* packets = tree.packets.data();
   for (const uint32_t i : ray_ids) {
     const Ray& ray = rays[i];
@@ -509,19 +527,16 @@ void all_hits_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, c
     const BoxLanes<V> box(ray);
     Lanes lanes(ray);
     traverse(tree, box, ray.tnear, tmax, [&](uint32_t first, uint32_t count, float& limit) {
-      for_each_lane_group<V>(
-          packets, first, count, [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
-            for (uint32_t bits = lanes.candidates(packet, lane, valid, ray.tnear, limit); bits != 0;
-                 bits &= bits - 1) {
-              const auto bit = static_cast<uint32_t>(__builtin_ctz(bits));
-              TriangleHit h;
-              if (!lanes.accept(packet, lane, bit, h)) continue;
-              append_hit(out, i,
-                         {h.t, packet.geometry_id[lane + bit], packet.primitive_id[lane + bit], h.u, h.v,
-                          packet.triangle(lane + bit).unit_normal()});
-            }
-            return false;
-          });
+      for_each_lane_group<V>(packets, first, count,
+                             [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
+                               for (uint32_t bits = lanes.candidates(packet, lane, valid, ray.tnear, limit);
+                                    bits != 0; bits &= bits - 1) {
+                                 const auto bit = static_cast<uint32_t>(__builtin_ctz(bits));
+                                 TriangleHit h;
+                                 if (lanes.accept(packet, lane, bit, h)) sink(i, packet, lane + bit, h);
+                               }
+                               return false;
+                             });
       return false;
     });
   }

@@ -65,6 +65,13 @@ void wide_bvh_all_hits(SimdPath path, TriangleTest test, const WideBvhView& tree
   wide_sse4::all_hits(test, tree, ray_ids, rays, out);
 }
 
+void wide_bvh_count_hits(SimdPath path, TriangleTest test, const WideBvhView& tree,
+                         std::span<const uint32_t> ray_ids, const Ray* rays, uint32_t* counts) {
+  if (tree.nodes.empty()) return;
+  if (path == SimdPath::kAvx2) return wide_avx2::count_hits(test, tree, ray_ids, rays, counts);
+  wide_sse4::count_hits(test, tree, ray_ids, rays, counts);
+}
+
 void append_hit(std::vector<RayHitRecord>& out, uint32_t ray, const Hit& hit) {
   out.push_back({ray, hit});
 }

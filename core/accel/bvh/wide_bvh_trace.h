@@ -50,6 +50,9 @@ void wide_bvh_occluded(SimdPath path, TriangleTest test, const WideBvhView& tree
 // (brick_queries.h).
 void wide_bvh_all_hits(SimdPath path, TriangleTest test, const WideBvhView& tree,
                        std::span<const uint32_t> ray_ids, const Ray* rays, std::vector<RayHitRecord>& out);
+// Adds each ray's hits in (tnear, tfar] to counts[i] (no records).
+void wide_bvh_count_hits(SimdPath path, TriangleTest test, const WideBvhView& tree,
+                         std::span<const uint32_t> ray_ids, const Ray* rays, uint32_t* counts);
 // Appends one record: the every-hit kernels call it, so that no std::vector
 // code is compiled inside the SIMD-targeted files (wide_bvh_trace_avx2.cpp).
 void append_hit(std::vector<RayHitRecord>& out, uint32_t ray, const Hit& hit);
@@ -65,6 +68,8 @@ void intersect(TriangleTest test, const WideBvhView& tree, std::span<const uint3
                Hit* hits);
 void all_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
               std::vector<RayHitRecord>& out);
+void count_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
+                const Ray* rays, uint32_t* counts);
 void occluded(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
               uint8_t* occluded);
 void set_intersect(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
@@ -77,6 +82,8 @@ void intersect(TriangleTest test, const WideBvhView& tree, std::span<const uint3
                Hit* hits);
 void all_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
               std::vector<RayHitRecord>& out);
+void count_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
+                const Ray* rays, uint32_t* counts);
 void occluded(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
               uint8_t* occluded);
 void set_intersect(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,

@@ -22,6 +22,11 @@ void all_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32
   wide_kernels::all_hits_tree<V>(test, tree, ray_ids, rays, out);
 }
 
+void count_hits(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
+                const Ray* rays, uint32_t* counts) {
+  wide_kernels::count_hits_tree<V>(test, tree, ray_ids, rays, counts);
+}
+
 void set_intersect(TriangleTest test, const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
                    const Ray* rays, Hit* hits) {
   wide_kernels::intersect_brick_set<V>(test, set, ray_ids, rays, hits);
