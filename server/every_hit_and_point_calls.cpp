@@ -90,6 +90,15 @@ void pack_points(v1::PointQueryKind kind, const std::vector<ClosestPoint>& close
 
 }  // namespace
 
+template <class Run>
+grpc::Status SceneQueryService::answer_once_wanted(grpc::ServerContext* context, const char* method,
+                                                   uint64_t items, const Run& run) {
+  const auto start = Clock::now();
+  const grpc::Status wanted = check_still_wanted(context, "request", items);
+  if (!wanted.ok()) return finish(context, method, wanted, items, start);
+  return finish(context, method, to_grpc_status(run()), items, start);
+}
+
 Status SceneQueryService::every_hit(const v1::QueryRequest& request, std::vector<uint32_t>& counts,
                                     std::vector<RayHitRecord>* records, QueryStats& stats) {
   if (request.has_shared())
@@ -100,12 +109,8 @@ Status SceneQueryService::every_hit(const v1::QueryRequest& request, std::vector
   OUTCORE_ASSIGN_OR_RETURN(const std::span<const Ray> rays,
                            check_request<QueryKind::kAllHits>(request, position, widened));
   OUTCORE_ASSIGN_OR_RETURN(auto dynamic, dynamic_for(request));
-  QueryOptions options;
-  options.reorder = !request.no_reorder();
-  options.strict = request.strict();
-  options.dynamic_snapshot = dynamic;
   counts.assign(rays.size(), 0);
-  OUTCORE_RETURN_IF_ERROR(engine_.all_hits(rays, counts, records, options, &stats));
+  OUTCORE_RETURN_IF_ERROR(engine_.all_hits(rays, counts, records, options_of(request, dynamic), &stats));
   counters_.add_answered(stats);
   return Status::Ok();
 }
@@ -113,7 +118,6 @@ Status SceneQueryService::every_hit(const v1::QueryRequest& request, std::vector
 grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context,
                                                    const v1::QueryRequest* request,
                                                    v1::CountResponse* response) {
-  const auto start = Clock::now();
   const auto run = [&]() -> Status {
     std::vector<uint32_t> counts;
     QueryStats stats;
@@ -124,15 +128,12 @@ grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context,
     wire::to_wire(stats, response->mutable_stats());
     return Status::Ok();
   };
-  const grpc::Status wanted = check_still_wanted(context, "request", request->batch().ray_count());
-  if (!wanted.ok()) return finish(context, "CountIntersections", wanted, request->batch().ray_count(), start);
-  return finish(context, "CountIntersections", to_grpc_status(run()), request->batch().ray_count(), start);
+  return answer_once_wanted(context, "CountIntersections", request->batch().ray_count(), run);
 }
 
 grpc::Status SceneQueryService::ListIntersections(grpc::ServerContext* context,
                                                   const v1::QueryRequest* request,
                                                   v1::ListResponse* response) {
-  const auto start = Clock::now();
   const auto run = [&]() -> Status {
     std::vector<uint32_t> counts;
     std::vector<RayHitRecord> records;
@@ -156,14 +157,11 @@ grpc::Status SceneQueryService::ListIntersections(grpc::ServerContext* context,
     wire::to_wire(stats, response->mutable_stats());
     return Status::Ok();
   };
-  const grpc::Status wanted = check_still_wanted(context, "request", request->batch().ray_count());
-  if (!wanted.ok()) return finish(context, "ListIntersections", wanted, request->batch().ray_count(), start);
-  return finish(context, "ListIntersections", to_grpc_status(run()), request->batch().ray_count(), start);
+  return answer_once_wanted(context, "ListIntersections", request->batch().ray_count(), run);
 }
 
 grpc::Status SceneQueryService::QueryPoints(grpc::ServerContext* context, const v1::PointRequest* request,
                                             v1::PointResponse* response) {
-  const auto start = Clock::now();
   const auto run = [&]() -> Status {
     OUTCORE_ASSIGN_OR_RETURN(const std::vector<Vec3f> points,
                              decode_points(*request, options_.max_message_bytes));
@@ -190,9 +188,7 @@ grpc::Status SceneQueryService::QueryPoints(grpc::ServerContext* context, const 
     wire::to_wire(stats, response->mutable_stats());
     return Status::Ok();
   };
-  const grpc::Status wanted = check_still_wanted(context, "request", request->point_count());
-  if (!wanted.ok()) return finish(context, "QueryPoints", wanted, request->point_count(), start);
-  return finish(context, "QueryPoints", to_grpc_status(run()), request->point_count(), start);
+  return answer_once_wanted(context, "QueryPoints", request->point_count(), run);
 }
 
 }  // namespace outcore::server

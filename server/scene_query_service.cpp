@@ -100,13 +100,19 @@ grpc::Status SceneQueryService::check_still_wanted(grpc::ServerContext* context,
   return grpc::Status::OK;
 }
 
+QueryOptions SceneQueryService::options_of(const v1::QueryRequest& request,
+                                           const std::shared_ptr<const DynamicSnapshot>& dynamic) {
+  QueryOptions options;
+  options.reorder = !request.no_reorder();
+  options.strict = request.strict();
+  options.dynamic_snapshot = dynamic;
+  return options;
+}
+
 template <QueryKind kKind>
 Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v1::QueryRequest& request,
                                 const std::shared_ptr<const DynamicSnapshot>& dynamic, QueryStats* stats) {
-  QueryOptions query_options;
-  query_options.reorder = !request.no_reorder();
-  query_options.strict = request.strict();
-  query_options.dynamic_snapshot = dynamic;
+  const QueryOptions query_options = options_of(request, dynamic);
   const uint64_t n = rays.size();
   Status status;
   if constexpr (kKind == QueryKind::kClosestHit) {

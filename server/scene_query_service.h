@@ -163,6 +163,16 @@ class SceneQueryService final : public SceneQueryBase {
   // The dynamic layer's version a call traces: the one the request names,
   // or the latest; held for all of the call's parts.
   Expected<std::shared_ptr<const DynamicSnapshot>> dynamic_for(const v1::QueryRequest& request) const;
+  // The engine's options a request asks for, tracing the given version of
+  // the dynamic layer.
+  static QueryOptions options_of(const v1::QueryRequest& request,
+                                 const std::shared_ptr<const DynamicSnapshot>& dynamic);
+  // A call of the every-hit and point family: CANCELLED or DEADLINE_EXCEEDED
+  // before `run` when the client no longer waits, then run's status,
+  // counted and logged by finish() under `method`.
+  template <class Run>
+  grpc::Status answer_once_wanted(grpc::ServerContext* context, const char* method, uint64_t items,
+                                  const Run& run);
   // Every hit of a request's rays: counts, and the sorted records when
   // `records` is given; checks the request as check_request does.
   Status every_hit(const v1::QueryRequest& request, std::vector<uint32_t>& counts,

@@ -128,6 +128,21 @@ const char* point_problem(const Vec3f& point) {
   return nullptr;
 }
 
+Expected<std::vector<uint32_t>> valid_point_ids(std::span<const Vec3f> points, bool strict,
+                                                uint64_t& invalid) {
+  std::vector<uint32_t> ids;
+  ids.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (const char* problem = point_problem(points[i])) {
+      if (strict) return invalid_argument("point " + std::to_string(i) + ": " + problem);
+      ++invalid;
+      continue;
+    }
+    ids.push_back(static_cast<uint32_t>(i));
+  }
+  return ids;
+}
+
 Status find_closest_points(PointQueryContext& ctx, std::span<const Vec3f> points,
                            std::span<ClosestPoint> answers) {
   QueryStats& stats = ctx.tally.stats;
@@ -135,16 +150,13 @@ Status find_closest_points(PointQueryContext& ctx, std::span<const Vec3f> points
   if (upper.depth() >= kUpperStack / 2)
     return internal_error("upper hierarchy deeper than point walks allow");
   const std::size_t n = points.size();
+  std::fill(answers.begin(), answers.end(), ClosestPoint{});
+  OUTCORE_ASSIGN_OR_RETURN(const std::vector<uint32_t> valid,
+                           valid_point_ids(points, ctx.strict, stats.invalid_rays));
   std::vector<std::pair<uint32_t, uint32_t>> pairs;  // (brick, point)
-  pairs.reserve(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    answers[i] = ClosestPoint{};
-    if (const char* problem = point_problem(points[i])) {
-      if (ctx.strict) return invalid_argument("point " + std::to_string(i) + ": " + problem);
-      ++stats.invalid_rays;
-      continue;
-    }
-    if (!upper.empty()) pairs.emplace_back(kInvalidId, static_cast<uint32_t>(i));
+  if (!upper.empty()) {
+    pairs.reserve(valid.size());
+    for (const uint32_t i : valid) pairs.emplace_back(kInvalidId, i);
   }
   // Round 1: each point's nearest brick.
   const auto t_upper = Clock::now();

@@ -29,6 +29,7 @@
 
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include "core/accel/brick_queries.h"
 #include "core/cache/brick_cache.h"
@@ -50,6 +51,11 @@ struct PointQueryContext {
 // A point is valid when its coordinates are finite and within the rays'
 // limit (kLargestRayComponent); nullptr or the reason.
 const char* point_problem(const Vec3f& point);
+
+// The indices of the valid points (point_problem), in order; an invalid one
+// is counted in `invalid`, or is INVALID_ARGUMENT naming it under strict.
+Expected<std::vector<uint32_t>> valid_point_ids(std::span<const Vec3f> points, bool strict,
+                                                uint64_t& invalid);
 
 // answers[i] for points[i]; an invalid point gets no answer (not found) and
 // is counted, or is INVALID_ARGUMENT naming it under strict.

@@ -107,6 +107,19 @@ Status QueryEngine::occluded(std::span<const Ray> rays, std::span<uint8_t> occlu
   return run<QueryKind::kAnyHit>(rays, {.occluded = occluded.data()}, options, stats);
 }
 
+namespace {
+
+// FAILED_PRECONDITION when the dynamic layer holds instances: `what` sees
+// the static scene only, and an answer without the layer would be wrong.
+Status static_scene_only(const DynamicSnapshot& dynamic, const char* what) {
+  if (dynamic.instances.empty()) return Status::Ok();
+  return failed_precondition(std::string(what) + " see the static scene only, and the dynamic layer holds " +
+                             std::to_string(dynamic.instances.size()) + " instance(s) at version " +
+                             std::to_string(dynamic.version));
+}
+
+}  // namespace
+
 Status QueryEngine::all_hits(std::span<const Ray> rays, std::span<uint32_t> counts,
                              std::vector<RayHitRecord>* records, const QueryOptions& options,
                              QueryStats* stats) {
@@ -133,11 +146,7 @@ Status QueryEngine::all_hits(std::span<const Ray> rays, std::span<uint32_t> coun
 Status QueryEngine::closest_points(std::span<const Vec3f> points, std::span<ClosestPoint> answers,
                                    const QueryOptions& options, QueryStats* stats_out) {
   if (answers.size() != points.size()) return invalid_argument("answers and points differ in length");
-  const std::shared_ptr<const DynamicSnapshot> dynamic = dynamic_.latest();
-  if (!dynamic->instances.empty())
-    return failed_precondition("point queries see the static scene only, and the dynamic layer holds " +
-                               std::to_string(dynamic->instances.size()) + " instance(s) at version " +
-                               std::to_string(dynamic->version));
+  OUTCORE_RETURN_IF_ERROR(static_scene_only(*dynamic_.latest(), "point queries"));
   const auto start = Clock::now();
   const uint64_t ticks_start = ticks();
   const CacheCounters counters_before = cache_->counters();
@@ -155,17 +164,10 @@ Status QueryEngine::occupancy(std::span<const Vec3f> points, std::span<uint8_t> 
                               const QueryOptions& options, QueryStats* stats_out) {
   if (inside.size() != points.size()) return invalid_argument("occupancy flags and points differ in length");
   QueryStats total;
-  std::vector<uint32_t> pending;  // points whose rays so far met an edge
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    inside[i] = 0;
-    if (const char* problem = point_problem(points[i])) {
-      if (options.strict) return invalid_argument("point " + std::to_string(i) + ": " + problem);
-      ++total.invalid_rays;
-      continue;
-    }
-    pending.push_back(static_cast<uint32_t>(i));
-  }
-  total.rays = points.size();
+  std::fill(inside.begin(), inside.end(), uint8_t{0});
+  // Points whose rays so far met an edge.
+  OUTCORE_ASSIGN_OR_RETURN(std::vector<uint32_t> pending,
+                           valid_point_ids(points, options.strict, total.invalid_rays));
   std::vector<uint8_t> odd_votes(points.size(), 0);
   std::vector<Ray> rays;
   std::vector<uint32_t> counts;
@@ -212,12 +214,7 @@ Status trace_dynamic(const DynamicSnapshot& dynamic, std::span<const Ray> rays, 
   stats.dynamic_version = dynamic.version;
   stats.dynamic_instances = dynamic.instances.size();
   if (dynamic.instances.empty()) return Status::Ok();
-  if constexpr (kKind == QueryKind::kAllHits) {
-    return failed_precondition(
-        "count and list queries see the static scene only, and the dynamic layer holds " +
-        std::to_string(dynamic.instances.size()) + " instance(s) at version " +
-        std::to_string(dynamic.version));
-  }
+  if constexpr (kKind == QueryKind::kAllHits) return static_scene_only(dynamic, "count and list queries");
   const auto start = Clock::now();
   const uint64_t newly_hit = kKind == QueryKind::kClosestHit
                                  ? dynamic.intersect(rays, {hits, rays.size()})

@@ -1,6 +1,7 @@
-"""Protobuf messages as plain Python values, for the clients' dicts.
+"""Protobuf messages as plain Python values, for the clients' dicts, and the
+sum of a call's per-chunk figures.
 
-Thread-safety: a pure function.
+Thread-safety: pure functions (add_fields writes only its `total`).
 """
 
 from __future__ import annotations
@@ -25,3 +26,10 @@ def message_to_dict(message) -> dict:
             value = field.enum_type.values_by_number[value].name
         out[field.name] = value
     return out
+
+
+def add_fields(total, part) -> None:
+    """Adds every field of `part` to `total`: two messages of one type whose
+    fields are all numbers (QueryStats of a call's chunks)."""
+    for field in part.DESCRIPTOR.fields:
+        setattr(total, field.name, getattr(total, field.name) + getattr(part, field.name))

@@ -16,8 +16,9 @@ import grpc
 import numpy as np
 
 from . import _wire
+from ._messages import add_fields
 from ._messages import message_to_dict as _message_to_dict
-from ._rays import as_wire_rays
+from ._rays import as_wire_points, as_wire_rays
 from .errors import OutcoreError, from_rpc_error
 from .v1 import scene_query_pb2 as pb
 
@@ -41,28 +42,6 @@ def _check_nsamples(nsamples) -> None:
     if isinstance(nsamples, bool) or not isinstance(nsamples, (int, np.integer)) or nsamples < 1 \
             or nsamples % 2 == 0:
         raise ValueError(f"nsamples must be an odd int >= 1, got {nsamples!r}")
-
-
-def _as_wire_points(points) -> tuple[np.ndarray, tuple[int, ...]]:
-    try:
-        arr = np.asarray(points)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"query_points must be an array of numbers of shape (..., 3): {e}") from None
-    if arr.dtype.kind not in "fiu":
-        raise ValueError(f"query_points must have a real numeric dtype (float32 preferred), got dtype {arr.dtype}")
-    if arr.ndim < 1 or arr.shape[-1] != 3:
-        raise ValueError(f"query_points must have shape (..., 3), got shape {arr.shape}")
-    flat = np.ascontiguousarray(arr, dtype="<f4").reshape(-1, 3)
-    return flat, tuple(arr.shape[:-1])
-
-
-def _add_stats(total: dict | None, part: dict) -> dict:
-    if total is None:
-        return part
-    for key, value in part.items():
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            total[key] = total.get(key, 0) + value
-    return total
 
 
 class Open3dQueries:
@@ -145,29 +124,29 @@ class Open3dQueries:
         inside = self._points(query_points, pb.POINT_QUERY_OCCUPANCY, np.dtype("u1"), strict)
         return inside.astype(np.float32)
 
-    def _plain_call(self, name: str, request_type, response_type):
+    def _plain_call(self, name: str, response_type, request_type=None):
+        """The unary call `name`, made once; request_type None: requests
+        are sent as already-serialised bytes."""
         path = f"/{_SERVICE}/{name}"
         call = self._plain_calls.get(path)
         if call is None:
-            call = self._channel.unary_unary(path, request_serializer=request_type.SerializeToString,
+            serializer = None if request_type is None else request_type.SerializeToString
+            call = self._channel.unary_unary(path, request_serializer=serializer,
                                              response_deserializer=response_type.FromString)
             self._plain_calls[path] = call
         return call
 
     def _every_hit(self, flat: np.ndarray, strict: bool, listing: bool):
         """Counts (n,) uint32 and, when listing, the hits (HIT_DTYPE), over
-        chunks that fit a message (halved when a list does not)."""
+        chunks that fit a message (a list chunk whose reply does not fit is
+        sent again in quarters)."""
         name, response = ("ListIntersections", pb.ListResponse) if listing else \
             ("CountIntersections", pb.CountResponse)
         # Requests serialised by _wire (one copy of the rays, no message object).
-        path = f"/{_SERVICE}/{name}"
-        call = self._plain_calls.get(path)
-        if call is None:
-            call = self._channel.unary_unary(path, response_deserializer=response.FromString)
-            self._plain_calls[path] = call
+        call = self._plain_call(name, response)
         n = flat.shape[0]
         chunk = max(1, min(n, (self._max_message_bytes - _MESSAGE_MARGIN) // (flat.shape[1] * 4), 1 << 18))
-        counts, hits, stats = [], [], None
+        counts, hits, stats = [], [], pb.QueryStats()
         start = 0
         while start < n:
             part = flat[start:start + chunk]
@@ -187,9 +166,9 @@ class Open3dQueries:
                         reply.hit_count != int(counts[-1].sum()):
                     raise OutcoreError("DATA_LOSS", "list reply's hits do not match its counts", name)
                 hits.append(np.frombuffer(reply.hits, dtype=_wire.HIT_DTYPE))
-            stats = _add_stats(stats, _message_to_dict(reply.stats))
+            add_fields(stats, reply.stats)
             start += part.shape[0]
-        self.last_stats = stats
+        self.last_stats = _message_to_dict(stats) if counts else None
         all_counts = np.concatenate(counts) if counts else np.zeros(0, np.uint32)
         all_hits = np.concatenate(hits) if hits else np.zeros(0, _wire.HIT_DTYPE)
         return all_counts, all_hits
@@ -197,11 +176,11 @@ class Open3dQueries:
     def _points(self, query_points, kind, dtype: np.dtype, strict: bool) -> np.ndarray:
         """Answers (..., 3) points with one record of `dtype` each, shaped
         like the points' batch dims."""
-        flat, batch_shape = _as_wire_points(query_points)
-        call = self._plain_call("QueryPoints", pb.PointRequest, pb.PointResponse)
+        flat, batch_shape = as_wire_points(query_points)
+        call = self._plain_call("QueryPoints", pb.PointResponse, pb.PointRequest)
         n = flat.shape[0]
         chunk = max(1, min(n, (self._max_message_bytes - _MESSAGE_MARGIN) // max(12, dtype.itemsize), 1 << 18))
-        parts, stats = [], None
+        parts, stats = [], pb.QueryStats()
         for start in range(0, n, chunk):
             part = flat[start:start + chunk]
             request = pb.PointRequest(layout_version=1, kind=kind, point_count=part.shape[0],
@@ -211,7 +190,7 @@ class Open3dQueries:
                 raise OutcoreError("DATA_LOSS", f"reply for {reply.point_count} points, sent {part.shape[0]}",
                                    "QueryPoints")
             parts.append(np.frombuffer(reply.answers, dtype=dtype))
-            stats = _add_stats(stats, _message_to_dict(reply.stats))
-        self.last_stats = stats
+            add_fields(stats, reply.stats)
+        self.last_stats = _message_to_dict(stats) if parts else None
         out = np.concatenate(parts) if parts else np.zeros(0, dtype)
         return out.reshape(batch_shape)

@@ -1,4 +1,5 @@
-"""Ray batches as the wire wants them: (N, 6) or (N, 8) little-endian float32.
+"""Ray batches as the wire wants them: (N, 6) or (N, 8) little-endian float32;
+points as (N, 3).
 
 Thread-safety: pure functions.
 """
@@ -19,15 +20,7 @@ def as_wire_rays(rays) -> tuple[np.ndarray, tuple[int, ...]]:
     Raises ValueError naming the problem for anything that is not a real
     numeric array of shape (..., 6) or (..., 8).
     """
-    try:
-        arr = np.asarray(rays)
-    except (TypeError, ValueError) as e:  # ragged lists and the like
-        raise ValueError(f"rays must be an array of numbers of shape (..., 6) or (..., 8): {e}") from None
-    # Integers convert exactly enough; bool, complex, strings and objects do not.
-    if arr.dtype.kind not in "fiu":
-        raise ValueError(
-            f"rays must have a real numeric dtype (float32 preferred), got dtype {arr.dtype}"
-        )
+    arr = _real_numbers(rays, "rays", "(..., 6) or (..., 8)")
     if arr.ndim < 2 or arr.shape[-1] not in RAY_COLUMNS:
         raise ValueError(
             "rays must have shape (N, 6) [ox oy oz dx dy dz] or (N, 8) [... tnear tfar] "
@@ -35,3 +28,25 @@ def as_wire_rays(rays) -> tuple[np.ndarray, tuple[int, ...]]:
         )
     flat = np.ascontiguousarray(arr, dtype=_WIRE_DTYPE).reshape(-1, arr.shape[-1])
     return flat, tuple(arr.shape[:-1])
+
+
+def as_wire_points(points, name: str = "query_points") -> tuple[np.ndarray, tuple[int, ...]]:
+    """Returns (flat, batch_shape) for points: `flat` C-contiguous (N, 3)
+    '<f4'; `batch_shape` is points.shape[:-1]. ValueError naming `name` for
+    anything that is not a real numeric array of shape (..., 3)."""
+    arr = _real_numbers(points, name, "(..., 3)")
+    if arr.ndim < 1 or arr.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (..., 3), got shape {arr.shape}")
+    flat = np.ascontiguousarray(arr, dtype=_WIRE_DTYPE).reshape(-1, 3)
+    return flat, tuple(arr.shape[:-1])
+
+
+def _real_numbers(values, name: str, shape: str) -> np.ndarray:
+    try:
+        arr = np.asarray(values)
+    except (TypeError, ValueError) as e:  # ragged lists and the like
+        raise ValueError(f"{name} must be an array of numbers of shape {shape}: {e}") from None
+    # Integers convert exactly enough; bool, complex, strings and objects do not.
+    if arr.dtype.kind not in "fiu":
+        raise ValueError(f"{name} must have a real numeric dtype (float32 preferred), got dtype {arr.dtype}")
+    return arr

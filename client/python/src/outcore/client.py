@@ -51,6 +51,7 @@ import numpy as np
 
 from . import _shared, _wire
 from ._rays import as_wire_rays
+from ._messages import add_fields
 from ._messages import message_to_dict as _message_to_dict
 from ._open3d_queries import Open3dQueries, _check_nthreads
 from .errors import OutcoreError, from_rpc_error
@@ -611,9 +612,7 @@ class SceneClient(Open3dQueries):
                                query.stream)
         totals = pb.QueryStats()
         for data in stats:
-            chunk_stats = pb.QueryStats.FromString(data)
-            for field in chunk_stats.DESCRIPTOR.fields:
-                setattr(totals, field.name, getattr(totals, field.name) + getattr(chunk_stats, field.name))
+            add_fields(totals, pb.QueryStats.FromString(data))
         self.last_stats = _message_to_dict(totals)
         self._last_call_shared = False
         out.flags.writeable = False
