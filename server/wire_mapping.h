@@ -41,13 +41,12 @@ struct KindTraits<QueryKind::kAnyHit> {
   static std::string* payload(v1::OccludedResponse* response) { return response->mutable_occluded(); }
 };
 
+// Every hit has no stream and no shared payload: check_request reads only
+// the reply's size per ray (the counts; a list's hits come on top and are
+// checked once known, every_hit_and_point_calls.cpp).
 template <>
 struct KindTraits<QueryKind::kAllHits> {
-  using Response = v1::CountResponse;
-  static constexpr uint64_t kReplyBytesPerRay = sizeof(uint32_t);  // the counts; a list's hits come on top
-  static constexpr const char* kUnary = "CountIntersections";
-  static constexpr const char* kStream = "CountIntersections";
-  static std::string* payload(v1::CountResponse* response) { return response->mutable_counts(); }
+  static constexpr uint64_t kReplyBytesPerRay = sizeof(uint32_t);
 };
 
 // "request", or "chunk N" of a stream: how errors name a batch.
