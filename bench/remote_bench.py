@@ -48,15 +48,21 @@ from trace_bench import SCENES, open3d_cast  # noqa: E402
 
 
 class Server:
-    def __init__(self, store):
+    """`outcore serve STORE` on loopback, 2 threads, 8 GiB cache; `extra`: more
+    flags (with --metrics-listen, `metrics` is its HOST:PORT)."""
+
+    def __init__(self, store, extra=()):
         self.proc = subprocess.Popen([OUTCORE, "serve", store, "--listen", "127.0.0.1:0", "--threads", "2",
-                                      "--cache-mb", "8192", "--log-level", "warn"],
+                                      "--cache-mb", "8192", "--log-level", "warn", *extra],
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.address = None
+        self.address = self.metrics = None
         ready = threading.Event()
 
         def read():
             for line in self.proc.stdout:
+                m = re.search(r"metrics on http://(\S+)", line)
+                if m:
+                    self.metrics = m.group(1)
                 m = re.search(r"listening on (\S+):(\d+)", line)
                 if m and self.address is None:
                     self.address = f"{m.group(1)}:{m.group(2)}"

@@ -12,6 +12,8 @@ APT_PACKAGES=(
   libboost-dev  # OpenVDB's headers include Boost; libopenvdb-dev does not pull it in
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler grpc-proto
   libspdlog-dev libtbb-dev libcli11-dev
+  libcpp-httplib-dev  # the server's metrics endpoint
+  openssl  # the TLS tests make their certificates with it
   libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev
   python3-venv python3-dev
 )

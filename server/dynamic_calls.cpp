@@ -35,6 +35,7 @@ Expected<std::vector<T>> unpack_triples(const std::string& bytes, uint64_t count
 grpc::Status SceneQueryService::AddMesh(grpc::ServerContext* context, const v1::AddMeshRequest* request,
                                         v1::AddMeshResponse* response) {
   const auto start = Clock::now();
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const auto run = [&]() -> Status {
     OUTCORE_ASSIGN_OR_RETURN(
         const std::vector<float> vertices,
@@ -54,6 +55,7 @@ grpc::Status SceneQueryService::AddInstance(grpc::ServerContext* context,
                                             const v1::AddInstanceRequest* request,
                                             v1::AddInstanceResponse* response) {
   const auto start = Clock::now();
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const auto run = [&]() -> Status {
     const std::vector<double> transform(request->transform().begin(), request->transform().end());
     OUTCORE_ASSIGN_OR_RETURN(const DynamicAdded added,
@@ -69,6 +71,7 @@ grpc::Status SceneQueryService::UpdateTransforms(grpc::ServerContext* context,
                                                  const v1::UpdateTransformsRequest* request,
                                                  v1::DynamicVersion* response) {
   const auto start = Clock::now();
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const std::vector<uint32_t> ids(request->geometry_ids().begin(), request->geometry_ids().end());
   const std::vector<double> transforms(request->transforms().begin(), request->transforms().end());
   auto version = engine_.dynamic().update_transforms(ids, transforms);
@@ -80,6 +83,7 @@ grpc::Status SceneQueryService::UpdateVertices(grpc::ServerContext* context,
                                                const v1::UpdateVerticesRequest* request,
                                                v1::DynamicVersion* response) {
   const auto start = Clock::now();
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const auto run = [&]() -> Status {
     OUTCORE_ASSIGN_OR_RETURN(
         const std::vector<float> vertices,
@@ -95,6 +99,7 @@ grpc::Status SceneQueryService::UpdateVertices(grpc::ServerContext* context,
 grpc::Status SceneQueryService::Remove(grpc::ServerContext* context, const v1::RemoveRequest* request,
                                        v1::DynamicVersion* response) {
   const auto start = Clock::now();
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   auto version = engine_.dynamic().remove(request->geometry_id());
   if (version.ok()) response->set_version(*version);
   return finish(context, "Remove", to_grpc_status(version.status()), 0, start);

@@ -94,6 +94,7 @@ template <class Run>
 grpc::Status SceneQueryService::answer_once_wanted(grpc::ServerContext* context, const char* method,
                                                    uint64_t items, const Run& run) {
   const auto start = Clock::now();
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const grpc::Status wanted = check_still_wanted(context, "request", items);
   if (!wanted.ok()) return finish(context, method, wanted, items, start);
   return finish(context, method, to_grpc_status(run()), items, start);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "server/grpc_status.h"
+#include "server/server_security.h"
 #include "server/stream_pipeline.h"
 #include "server/wire_mapping.h"
 
@@ -73,10 +74,17 @@ Expected<std::span<const Ray>> SceneQueryService::check_request(const v1::QueryR
     return invalid_argument(where(position) +
                             ": shared payloads are for the unary calls (Intersect, Occluded), not streams");
   }
+  if (request.hit_fields() != v1::HIT_FIELDS_ALL &&
+      (kKind != QueryKind::kClosestHit || wire::hit_record_bytes(request.hit_fields()) == 0)) {
+    return invalid_argument(where(position) + ": hit_fields " + std::to_string(request.hit_fields()) +
+                            (kKind == QueryKind::kClosestHit
+                                 ? " is not a HitFields value (0 all, 1 t, 2 t and ids)"
+                                 : " applies to Intersect only (leave it HIT_FIELDS_ALL)"));
+  }
   auto rays = decode_ray_batch(request.batch(), storage);
   if (!rays.ok()) return rays.status().with_context(where(position));
   const uint64_t n = rays->size();
-  const uint64_t reply_bytes = n * KindTraits<kKind>::kReplyBytesPerRay + kReplyOverheadBytes;
+  const uint64_t reply_bytes = n * reply_bytes_per_ray<kKind>(request) + kReplyOverheadBytes;
   if (reply_bytes > options_.max_message_bytes) {
     return resource_exhausted(where(position) + ": the reply to " + std::to_string(n) +
                               " rays would take about " + std::to_string(reply_bytes) +
@@ -117,8 +125,16 @@ Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v
   Status status;
   if constexpr (kKind == QueryKind::kClosestHit) {
     // Hits go straight into `out` (a reply's bytes); a std::string's buffer
-    // is float-aligned in practice, the fallback only costs a copy.
-    if (reinterpret_cast<uintptr_t>(out) % alignof(Hit) == 0) {
+    // is float-aligned in practice, the fallback only costs a copy. Fewer
+    // fields than all are traced into this thread's scratch and packed.
+    if (request.hit_fields() != v1::HIT_FIELDS_ALL) {
+      thread_local std::vector<Hit> scratch;
+      scratch.resize(n);
+      status = engine_.intersect(rays, scratch, query_options, stats);
+      if (status.ok()) wire::pack_hit_fields(scratch, request.hit_fields(), out);
+      // A huge batch's scratch is not kept for the thread's life.
+      if (scratch.capacity() * sizeof(Hit) > kKeepSharedBufferBytes) std::vector<Hit>().swap(scratch);
+    } else if (reinterpret_cast<uintptr_t>(out) % alignof(Hit) == 0) {
       status = engine_.intersect(rays, std::span<Hit>(reinterpret_cast<Hit*>(out), n), query_options, stats);
     } else {
       std::vector<Hit> hits(n);
@@ -172,7 +188,7 @@ grpc::Status SceneQueryService::answer(grpc::ServerContext* context, const v1::Q
   auto dynamic = dynamic_for(request);
   if (!dynamic.ok()) return to_grpc_status(dynamic.status().with_context("request.dynamic_version"));
   std::string* payload = Traits::payload(response);
-  payload->resize(n * Traits::kReplyBytesPerRay);
+  payload->resize(n * reply_bytes_per_ray<kKind>(request));
   QueryStats stats;
   const Status status =
       trace<kKind>(*rays, reinterpret_cast<uint8_t*>(payload->data()), request, *dynamic, &stats);
@@ -181,9 +197,14 @@ grpc::Status SceneQueryService::answer(grpc::ServerContext* context, const v1::Q
     return to_grpc_status(status);
   }
   set_reply_header(response, n, request.sequence());
+  if constexpr (kKind == QueryKind::kClosestHit) response->set_hit_fields(request.hit_fields());
   response->set_dynamic_version((*dynamic)->version);
   wire::to_wire(stats, response->mutable_stats());
   return grpc::Status::OK;
+}
+
+grpc::Status SceneQueryService::authorize(const grpc::ServerContext& context) const {
+  return check_bearer_token(context, options_.auth_token);
 }
 
 grpc::Status SceneQueryService::finish(grpc::ServerContext* context, const char* method,
@@ -222,6 +243,7 @@ template <class Response, class Handler>
 grpc::Status SceneQueryService::serve_unary(grpc::ServerContext* context,
                                             grpc::ServerUnaryStreamer<v1::QueryRequest, Response>* streamer,
                                             const char* method, const Handler& handler) {
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   v1::QueryRequest request;
   if (!streamer->Read(&request)) {
     if (context->IsCancelled()) {
@@ -263,8 +285,9 @@ grpc::Status SceneQueryService::StreamedOccluded(
                      });
 }
 
-grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext*, const v1::GetSceneInfoRequest*,
+grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext* context, const v1::GetSceneInfoRequest*,
                                              v1::SceneInfo* response) {
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const SceneStore& store = engine_.store();
   const Manifest& manifest = store.manifest();
   response->set_store_path(store.directory());
@@ -295,8 +318,9 @@ grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext*, const v1::Get
   return grpc::Status::OK;
 }
 
-grpc::Status SceneQueryService::GetStats(grpc::ServerContext*, const v1::GetStatsRequest*,
+grpc::Status SceneQueryService::GetStats(grpc::ServerContext* context, const v1::GetStatsRequest*,
                                          v1::ServerStats* response) {
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const ServiceCounters c = counters();
   response->set_requests(c.requests);
   response->set_failed_requests(c.failed_requests);

@@ -62,6 +62,9 @@ struct ServiceOptions {
   // Accept SharedPayload requests from loopback peers (the server's
   // --no-shared-payloads turns this off).
   bool shared_payloads = true;
+  // When not empty, every call must carry "authorization: Bearer <token>"
+  // (the server's --auth-token-file; server_security.h).
+  std::string auth_token;
 };
 
 // A call's ray and answer buffers (a shared-payload call's, a stream's
@@ -188,6 +191,17 @@ class SceneQueryService final : public SceneQueryBase {
   template <QueryKind kKind, class Response>
   grpc::Status answer_group(grpc::ServerContext* context, std::span<const std::unique_ptr<StreamChunk>> group,
                             CallBuffers* buffers, std::span<const std::unique_ptr<Response>> replies);
+  // What every chunk of a stream must share with its first: the hit fields
+  // and the dynamic layer's version (taken at the first chunk).
+  struct StreamSettings {
+    v1::HitFields hit_fields = v1::HIT_FIELDS_ALL;
+    std::shared_ptr<const DynamicSnapshot> dynamic;
+  };
+  // Takes the first chunk's settings into `stream`, or checks a later
+  // chunk's against them (INVALID_ARGUMENT naming the chunk; NOT_FOUND for a
+  // dynamic version no longer kept).
+  Status settle_stream_chunk(const v1::QueryRequest& request, const BatchPosition& position,
+                             StreamSettings& stream) const;
   // IntersectStream / OccludedStream. Chunks arrive as bytes and are parsed
   // here: gRPC's typed Read() reports bytes that do not parse as the end of
   // the stream, which would end it OK with the chunk unanswered.
@@ -200,6 +214,9 @@ class SceneQueryService final : public SceneQueryBase {
   grpc::Status serve_unary(grpc::ServerContext* context,
                            grpc::ServerUnaryStreamer<v1::QueryRequest, Response>* streamer,
                            const char* method, const Handler& handler);
+  // UNAUTHENTICATED unless the call carries the token options_ require
+  // (each handler's first step; health and reflection are not ours).
+  grpc::Status authorize(const grpc::ServerContext& context) const;
   // Counts one answered request and logs it at debug level.
   grpc::Status finish(grpc::ServerContext* context, const char* method, const grpc::Status& status,
                       uint64_t rays, std::chrono::steady_clock::time_point start);

@@ -6,6 +6,7 @@
 #include <grpcpp/resource_quota.h>
 #include <signal.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/sinks/stdout_sinks.h>
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
@@ -22,10 +23,16 @@
 
 #include "core/cli/commands.h"
 #include "core/cli/engine_options_cli.h"
+#include "core/io/bearer_token_file.h"
 #include "core/query/query_engine.h"
 #include "core/util/cancellation.h"
 #include "core/util/loopback_address.h"
+#include "server/json_log_formatter.h"
+#include "server/metrics_http_server.h"
+#include "server/rpc_metrics.h"
 #include "server/scene_query_service.h"
+#include "server/server_security.h"
+#include "server/throughput_history.h"
 
 namespace outcore {
 
@@ -49,7 +56,12 @@ struct ServeArgs {
   int64_t stream_gather_ms = -1;  // negative: automatic
   bool no_shared_payloads = false;
   std::string log_level = "info";
-  double drain_s = 10;  // in-flight calls' time to finish after SIGINT/SIGTERM
+  std::string log_format = "text";
+  std::string metrics_listen;  // empty: no metrics endpoint
+  server::TlsFiles tls;
+  std::string auth_token_file;
+  bool insecure = false;  // plaintext on a non-loopback address is allowed
+  double drain_s = 10;    // in-flight calls' time to finish after SIGINT/SIGTERM
 };
 
 void log_summary(const server::SceneQueryService& service, const QueryEngine& engine) {
@@ -72,9 +84,10 @@ void log_summary(const server::SceneQueryService& service, const QueryEngine& en
 
 // Serves until SIGINT or SIGTERM (returned): once a second checks whether the
 // store was replaced on disk, and logs a summary at most every
-// kSummaryInterval when requests came in.
+// kSummaryInterval when requests came in; records the rays answered each
+// second for the status page's recent throughput.
 int serve_until_stop_signal(const sigset_t& stop_signals, server::SceneQueryService& service,
-                            const QueryEngine& engine) {
+                            const QueryEngine& engine, server::ThroughputHistory& throughput) {
   int signal_number = 0;
   auto last_summary = std::chrono::steady_clock::now();
   uint64_t requests_at_summary = 0;
@@ -83,6 +96,7 @@ int serve_until_stop_signal(const sigset_t& stop_signals, server::SceneQueryServ
     signal_number = sigtimedwait(&stop_signals, nullptr, &tick);
     if (signal_number <= 0) service.check_store();
     const auto now = std::chrono::steady_clock::now();
+    throughput.record(now, service.counters().answered.rays);
     if (signal_number <= 0 && now - last_summary >= kSummaryInterval) {
       const uint64_t requests = service.counters().requests;
       if (requests != requests_at_summary) log_summary(service, engine);
@@ -158,7 +172,7 @@ Status check_serve_args(const ServeArgs& args) {
     const auto port = port_of(args.listen, 0);
     if (!port.ok()) return invalid_argument("--listen " + port.status().message());
   }
-  return Status::Ok();
+  return server::check_listen_exposure(args.listen, args.tls.enabled(), args.insecure);
 }
 
 void log_engine(const QueryEngine& engine, const EngineOptions& engine_options) {
@@ -176,8 +190,13 @@ void log_engine(const QueryEngine& engine, const EngineOptions& engine_options) 
   }
 }
 
-server::ServiceOptions service_options_of(const ServeArgs& args) {
+Expected<server::ServiceOptions> service_options_of(const ServeArgs& args) {
   server::ServiceOptions service_options;
+  if (!args.auth_token_file.empty()) {
+    auto token = read_bearer_token_file(args.auth_token_file);
+    if (!token.ok()) return token.status().with_context("--auth-token-file");
+    service_options.auth_token = std::move(*token);
+  }
   service_options.max_message_bytes = uint64_t{args.max_message_mb} << 20;
   service_options.max_group_rays = static_cast<uint64_t>(args.stream_group_rays);
   service_options.gather_wait_ms = args.stream_gather_ms;
@@ -186,13 +205,18 @@ server::ServiceOptions service_options_of(const ServeArgs& args) {
 }
 
 // The gRPC server with `service` registered, listening (null when it cannot
-// listen); *port is the port it listens on.
+// listen); *port is the port it listens on. Every call ends in `rpc_metrics`.
 std::unique_ptr<grpc::Server> start_grpc_server(const ServeArgs& args, server::SceneQueryService& service,
-                                                uint64_t max_message_bytes, int* port) {
+                                                const std::shared_ptr<grpc::ServerCredentials>& credentials,
+                                                server::RpcMetrics& rpc_metrics, uint64_t max_message_bytes,
+                                                int* port) {
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(args.listen, grpc::InsecureServerCredentials(), port);
+  builder.AddListeningPort(args.listen, credentials, port);
+  std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>> interceptors;
+  interceptors.push_back(std::make_unique<server::RpcMetricsInterceptorFactory>(rpc_metrics));
+  builder.experimental().SetInterceptorCreators(std::move(interceptors));
   // gRPC sets SO_REUSEPORT by default: a second server on a taken port would
   // silently share it. A busy port is an error instead.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
@@ -207,6 +231,36 @@ std::unique_ptr<grpc::Server> start_grpc_server(const ServeArgs& args, server::S
   return builder.BuildAndStart();
 }
 
+// The metrics endpoint when --metrics-listen is given (else null), its
+// address printed as "metrics on http://HOST:PORT" before "listening on".
+Expected<std::unique_ptr<server::MetricsHttpServer>> start_metrics(
+    const ServeArgs& args, const server::SceneQueryService& service, const QueryEngine& engine,
+    const server::RpcMetrics& rpc_metrics, const server::ThroughputHistory& throughput,
+    const std::string& address) {
+  if (args.metrics_listen.empty()) return std::unique_ptr<server::MetricsHttpServer>();
+  server::ServerIdentity identity;
+  identity.scene = args.scene;
+  identity.address = address;
+  identity.brick_structure = engine.cache().builder().name();
+  identity.eviction_policy = engine.cache().policy().name();
+  identity.triangles = engine.store().manifest().triangle_count;
+  identity.bricks = engine.store().brick_count();
+  identity.tls = args.tls.enabled();
+  identity.token = !args.auth_token_file.empty();
+  identity.version = OUTCORE_VERSION;
+  const auto started = std::chrono::steady_clock::now();
+  auto collect = [&service, &engine, &rpc_metrics, started] {
+    const double uptime = std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    return server::collect_metrics(service, engine, rpc_metrics, uptime);
+  };
+  OUTCORE_ASSIGN_OR_RETURN(
+      auto metrics, server::MetricsHttpServer::start(args.metrics_listen, collect, identity, throughput));
+  std::printf("metrics on http://%s\n", metrics->address().c_str());
+  spdlog::info("metrics at http://{}/metrics, status page at http://{}/", metrics->address(),
+               metrics->address());
+  return metrics;
+}
+
 int run_serve(const ServeArgs& args) {
   // Signals are taken synchronously by this thread (sigtimedwait below), so
   // every thread started from here on (gRPC, TBB) inherits them blocked.
@@ -216,7 +270,10 @@ int run_serve(const ServeArgs& args) {
   sigaddset(&stop_signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
-  spdlog::set_default_logger(spdlog::stderr_color_mt("outcore-serve"));
+  auto logger = args.log_format == "json" ? spdlog::stderr_logger_mt("outcore-serve")
+                                          : spdlog::stderr_color_mt("outcore-serve");
+  if (args.log_format == "json") logger->set_formatter(std::make_unique<server::JsonLogFormatter>());
+  spdlog::set_default_logger(logger);
   spdlog::set_level(spdlog::level::from_str(args.log_level));
 
   const Status checked = check_serve_args(args);
@@ -233,25 +290,33 @@ int run_serve(const ServeArgs& args) {
   if (!engine.ok()) return report_command_error("serve", engine.status().message());
   log_engine(**engine, engine_options);
 
-  const server::ServiceOptions service_options = service_options_of(args);
-  server::SceneQueryService service(**engine, service_options);
+  const auto service_options = service_options_of(args);
+  if (!service_options.ok()) return report_command_error("serve", service_options.status().message());
+  const auto credentials = server::server_credentials(args.tls);
+  if (!credentials.ok()) return report_command_error("serve", credentials.status().message());
+  server::SceneQueryService service(**engine, *service_options);
+  server::RpcMetrics rpc_metrics;
   int port = 0;
   std::unique_ptr<grpc::Server> server =
-      start_grpc_server(args, service, service_options.max_message_bytes, &port);
+      start_grpc_server(args, service, *credentials, rpc_metrics, service_options->max_message_bytes, &port);
   if (!server || port == 0) return report_command_error("serve", "cannot listen on " + args.listen);
   // The health service answers SERVING from here on (the scene is open), for
   // the server as a whole ("") and for the service by name.
   server->GetHealthCheckService()->SetServingStatus(v1::SceneQuery::service_full_name(), true);
   const std::string address = args.listen.substr(0, args.listen.rfind(':')) + ":" + std::to_string(port);
+  server::ThroughputHistory throughput;
+  auto metrics = start_metrics(args, service, **engine, rpc_metrics, throughput, address);
+  if (!metrics.ok()) return report_command_error("serve", metrics.status().message());
   std::printf("listening on %s\n", address.c_str());
   std::fflush(stdout);
   const Manifest& manifest = (*engine)->store().manifest();
   spdlog::info("serving {} ({} triangles, {} bricks, cache budget {} MiB) on {}", args.scene,
                manifest.triangle_count, (*engine)->store().brick_count(), args.engine.cache_mb, address);
 
-  const int signal_number = serve_until_stop_signal(stop_signals, service, **engine);
+  const int signal_number = serve_until_stop_signal(stop_signals, service, **engine, throughput);
   spdlog::info("signal {}: draining in-flight calls (at most {} s)", signal_number, args.drain_s);
   drain_and_stop(*server, args.drain_s, service, **engine);
+  metrics->reset();
   log_summary(service, **engine);
   spdlog::info("stopped");
   return 0;
@@ -294,6 +359,21 @@ void add_serve_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--log-level", args->log_level, "Log level")
       ->check(CLI::IsMember({"debug", "info", "warn"}))
       ->capture_default_str();
+  cmd->add_option("--log-format", args->log_format, "Log lines as text, or as one JSON object each")
+      ->check(CLI::IsMember({"text", "json"}))
+      ->capture_default_str();
+  cmd->add_option("--metrics-listen", args->metrics_listen,
+                  "HOST:PORT for Prometheus metrics (/metrics) and a status page (/); port 0: any free port");
+  cmd->add_option("--tls-cert", args->tls.cert,
+                  "Serve TLS with this certificate chain (PEM; needs --tls-key)");
+  cmd->add_option("--tls-key", args->tls.key, "The TLS certificate's private key (PEM)");
+  cmd->add_option("--tls-client-ca", args->tls.client_ca,
+                  "Require client certificates signed by this CA (PEM; mutual TLS)");
+  cmd->add_option(
+      "--auth-token-file", args->auth_token_file,
+      "Require every call to carry this file's token (authorization: Bearer TOKEN); health exempt");
+  cmd->add_flag("--insecure", args->insecure,
+                "Allow plaintext on a non-loopback --listen address (refused without TLS otherwise)");
   cmd->callback([args, &exit_code] { exit_code = run_serve(*args); });
 }
 

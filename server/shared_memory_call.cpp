@@ -26,6 +26,11 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     context->AddTrailingMetadata(wire::kSharedRefusedKey, wire::kSharedRefusedValue);
     return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, why + "; send the rays in batch.rays");
   };
+  if (request.hit_fields() != v1::HIT_FIELDS_ALL) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        "request: hit_fields applies to answers in the reply's bytes; a shared payload's "
+                        "answers are whole hit records (leave it HIT_FIELDS_ALL)");
+  }
   if (!options_.shared_payloads) return refuse("this server runs with --no-shared-payloads");
   if (!is_loopback_peer(context->peer())) {
     return refuse("shared payloads are accepted from loopback peers only, not from " + context->peer());

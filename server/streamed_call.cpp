@@ -27,6 +27,31 @@ using Clock = std::chrono::steady_clock;
 
 }  // namespace
 
+Status SceneQueryService::settle_stream_chunk(const v1::QueryRequest& request, const BatchPosition& position,
+                                              StreamSettings& stream) const {
+  // A group of chunks is traced and packed as its first chunk asks, so the
+  // whole stream has the fields of its first chunk.
+  if (position.chunk == 0) {
+    stream.hit_fields = request.hit_fields();
+  } else if (request.hit_fields() != stream.hit_fields) {
+    return invalid_argument(where(position) + " asks for hit_fields " + std::to_string(request.hit_fields()) +
+                            ", the stream's are " + std::to_string(stream.hit_fields) +
+                            " (one set of fields a stream)");
+  }
+  // The whole stream sees one version of the dynamic layer: the one its
+  // first chunk names (or the latest then); later chunks may only repeat it.
+  if (stream.dynamic == nullptr) {
+    auto dynamic = dynamic_for(request);
+    if (!dynamic.ok()) return dynamic.status().with_context(where(position) + ".dynamic_version");
+    stream.dynamic = *dynamic;
+  } else if (request.has_dynamic_version() && request.dynamic_version() != stream.dynamic->version) {
+    return invalid_argument(where(position) + " names dynamic version " +
+                            std::to_string(request.dynamic_version()) + ", the stream traces version " +
+                            std::to_string(stream.dynamic->version) + " (one version a stream)");
+  }
+  return Status::Ok();
+}
+
 template <QueryKind kKind, class Response>
 grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
                                              std::span<const std::unique_ptr<StreamChunk>> group,
@@ -47,7 +72,7 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
   Status status;
   if (group.size() == 1) {
     std::string* payload = Traits::payload(replies.front().get());
-    payload->resize(n * Traits::kReplyBytesPerRay);
+    payload->resize(n * reply_bytes_per_ray<kKind>(first.request));
     status = trace<kKind>(first.rays, reinterpret_cast<uint8_t*>(payload->data()), first.request,
                           first.dynamic, &stats);
   } else {
@@ -55,7 +80,7 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
     // its answers split into the chunks' replies (two copies, far cheaper
     // than tracing the chunks one by one; see stream_pipeline.h).
     buffers->rays.resize(n);
-    buffers->answers.resize(n * Traits::kReplyBytesPerRay);
+    buffers->answers.resize(n * reply_bytes_per_ray<kKind>(first.request));
     uint64_t at = 0;
     for (const auto& chunk : group) {
       if (!chunk->rays.empty()) std::memcpy(&buffers->rays[at], chunk->rays.data(), chunk->rays.size_bytes());
@@ -66,7 +91,7 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
     if (status.ok()) {
       at = 0;
       for (size_t i = 0; i < group.size(); ++i) {
-        const uint64_t bytes = group[i]->rays.size() * Traits::kReplyBytesPerRay;
+        const uint64_t bytes = group[i]->rays.size() * reply_bytes_per_ray<kKind>(first.request);
         Traits::payload(replies[i].get())
             ->assign(reinterpret_cast<const char*>(buffers->answers.data()) + at, bytes);
         at += bytes;
@@ -78,6 +103,7 @@ grpc::Status SceneQueryService::answer_group(grpc::ServerContext* context,
     Response* reply = replies[i].get();
     set_reply_header(reply, group[i]->rays.size(), group[i]->request.sequence());
     reply->set_dynamic_version(first.dynamic->version);
+    if constexpr (kKind == QueryKind::kClosestHit) reply->set_hit_fields(first.request.hit_fields());
     if (i + 1 == group.size()) {
       // The engine call's figures go with the group's last reply; the others
       // count only their own rays (the stream's sums stay exact).
@@ -94,6 +120,7 @@ template <QueryKind kKind, class Response>
 grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
                                              grpc::ServerReaderWriter<Response, grpc::ByteBuffer>* stream) {
   using Traits = KindTraits<kKind>;
+  OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
   const auto stream_start = Clock::now();
   StreamPipeline<Response, grpc::ServerReaderWriter<Response, grpc::ByteBuffer>> pipeline(
       stream, options_.max_group_rays, std::chrono::milliseconds(options_.gather_wait_ms));
@@ -126,7 +153,7 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
   BatchPosition position;
   position.streamed = true;
   grpc::Status status = grpc::Status::OK;
-  std::shared_ptr<const DynamicSnapshot> stream_dynamic;
+  StreamSettings settings;
   grpc::ByteBuffer bytes;
   for (;;) {
     std::unique_ptr<StreamChunk> chunk = pipeline.spare_chunk();
@@ -150,29 +177,13 @@ grpc::Status SceneQueryService::serve_stream(grpc::ServerContext* context,
       break;
     }
     chunk->rays = *rays;
-    // The whole stream sees one version of the dynamic layer: the one its
-    // first chunk names (or the latest then); later chunks may only repeat it.
-    if (stream_dynamic == nullptr) {
-      auto dynamic = dynamic_for(chunk->request);
-      if (!dynamic.ok()) {
-        status = finish(context, Traits::kStream,
-                        to_grpc_status(dynamic.status().with_context(where(position) + ".dynamic_version")),
-                        chunk->request.batch().ray_count(), start);
-        break;
-      }
-      stream_dynamic = *dynamic;
-    } else if (chunk->request.has_dynamic_version() &&
-               chunk->request.dynamic_version() != stream_dynamic->version) {
-      status = finish(
-          context, Traits::kStream,
-          grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                       where(position) + " names dynamic version " +
-                           std::to_string(chunk->request.dynamic_version()) + ", the stream traces version " +
-                           std::to_string(stream_dynamic->version) + " (one version a stream)"),
-          chunk->request.batch().ray_count(), start);
+    const Status settled = settle_stream_chunk(chunk->request, position, settings);
+    if (!settled.ok()) {
+      status = finish(context, Traits::kStream, to_grpc_status(settled), chunk->request.batch().ray_count(),
+                      start);
       break;
     }
-    chunk->dynamic = stream_dynamic;
+    chunk->dynamic = settings.dynamic;
     position.first_ray += rays->size();
     ++position.chunk;
     if (!pipeline.push(std::move(chunk))) break;

@@ -9,11 +9,13 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 
 #include "core/query/query_stats.h"
 #include "core/ray/query_types.h"
 #include "outcore/v1/scene_query.pb.h"
+#include "proto/outcore/v1/hit_fields_wire.h"
 #include "proto/outcore/v1/query_stats_wire.h"
 #include "server/ray_batch.h"
 
@@ -48,6 +50,16 @@ template <>
 struct KindTraits<QueryKind::kAllHits> {
   static constexpr uint64_t kReplyBytesPerRay = sizeof(uint32_t);
 };
+
+// Bytes of one ray's answer in a reply to `request`.
+template <QueryKind kKind>
+uint64_t reply_bytes_per_ray(const v1::QueryRequest& request) {
+  if constexpr (kKind == QueryKind::kClosestHit) {
+    return wire::hit_record_bytes(request.hit_fields());
+  } else {
+    return KindTraits<kKind>::kReplyBytesPerRay;
+  }
+}
 
 // "request", or "chunk N" of a stream: how errors name a batch.
 std::string where(const BatchPosition& position);

@@ -1,10 +1,11 @@
 // The `outcore` command: one binary whose subcommands are implemented in the
 // component they belong to (core: pack, info, trace, render; server: serve;
-// client: query and render's remote half).
+// client: query, health and render's remote half).
 #include <malloc.h>
 
 #include <CLI/CLI.hpp>
 
+#include "client/cli/health_command.h"
 #include "client/cli/query_command.h"
 #include "client/cli/render_remote.h"
 #include "core/cli/commands.h"
@@ -32,6 +33,7 @@ int main(int argc, char** argv) {
   outcore::add_calibrate_command(app, exit_code);
   outcore::add_serve_command(app, exit_code);
   outcore::add_query_command(app, exit_code);
+  outcore::add_health_command(app, exit_code);
   outcore::add_render_command(app, exit_code, outcore::connect_render_server);
   CLI11_PARSE(app, argc, argv);
   return exit_code;

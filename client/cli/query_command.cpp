@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "client/cli/channel_options.h"
 #include "client/cpp/scene_client.h"
 #include "core/cli/commands.h"
 #include "core/io/npy.h"
@@ -30,6 +31,9 @@ struct QueryArgs {
   bool print_stats = false;
   bool no_shared_memory = false;
   int repeat = 1;
+  ChannelSecurityArgs security;
+  bool quiet = false;
+  std::string hit_fields = "all";
 };
 
 int run_query(const QueryArgs& args) {
@@ -45,6 +49,9 @@ int run_query(const QueryArgs& args) {
   client::ConnectOptions connect_options;
   if (args.deadline_seconds > 0) connect_options.timeout_seconds = args.deadline_seconds;
   connect_options.shared_memory = !args.no_shared_memory;
+  auto security = channel_security_of(args.security);
+  if (!security.ok()) return report_command_error("query", security.status().message());
+  connect_options.security = std::move(*security);
   auto connection = client::SceneClient::connect(args.server, connect_options);
   if (!connection.ok()) return report_command_error("query", connection.status().message());
   client::SceneClient& scene = **connection;
@@ -54,6 +61,15 @@ int run_query(const QueryArgs& args) {
   options.strict = args.strict;
   options.no_reorder = args.no_reorder;
   options.chunk_rays = args.chunk_rays;
+  options.hit_fields = args.hit_fields == "t"       ? v1::HIT_FIELDS_T
+                       : args.hit_fields == "t,ids" ? v1::HIT_FIELDS_T_IDS
+                                                    : v1::HIT_FIELDS_ALL;
+  ProgressStyle style;
+  style.show_after = kShowProgressAfter;
+  ProgressBar progress("query", rays->size() * static_cast<uint64_t>(std::max(1, args.repeat)), "rays",
+                       !args.quiet, stderr, std::move(style));
+  ProgressTicker ticker(progress);
+  options.progress = &progress;
   client::CallStats stats;
   Status status;
   Status written;
@@ -70,6 +86,7 @@ int run_query(const QueryArgs& args) {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (args.repeat > 1 && status.ok()) std::printf("call %d/%d seconds %.6f\n", r + 1, args.repeat, seconds);
   }
+  progress.finish();
   if (status.ok()) {
     written =
         args.any_hit ? write_bools_npy(args.output_path, occluded) : write_hits_npy(args.output_path, hits);
@@ -118,6 +135,14 @@ void add_query_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--repeat", args->repeat,
                   "Send the batch this many times, printing each call's wall seconds")
       ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
+  add_channel_security_options(*cmd, args->security);
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress line on stderr (shown for calls over 2 s)");
+  cmd->add_option(
+         "--hit-fields", args->hit_fields,
+         "Hit fields the replies carry over the bytes path: all (32 bytes a ray), t (4) or t,ids (12); "
+         "the others are written as a miss's (ids 4294967295, u = v = 0, zero normal)")
+      ->check(CLI::IsMember({"all", "t", "t,ids"}))
       ->capture_default_str();
   cmd->callback([args, &exit_code] { exit_code = run_query(*args); });
 }

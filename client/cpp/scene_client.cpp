@@ -14,6 +14,8 @@
 #include <thread>
 
 #include "core/util/loopback_address.h"
+#include "proto/outcore/v1/grpc_code_names.h"
+#include "proto/outcore/v1/hit_fields_wire.h"
 #include "proto/outcore/v1/query_stats_wire.h"
 #include "proto/outcore/v1/shared_payload_wire.h"
 
@@ -59,29 +61,6 @@ void parallel_copy(void* destination, const void* source, std::size_t bytes) {
                       std::memcpy(static_cast<char*>(destination) + first,
                                   static_cast<const char*>(source) + first, last - first);
                     });
-}
-
-const char* grpc_code_name(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::OK: return "OK";
-    case grpc::StatusCode::CANCELLED: return "CANCELLED";
-    case grpc::StatusCode::UNKNOWN: return "UNKNOWN";
-    case grpc::StatusCode::INVALID_ARGUMENT: return "INVALID_ARGUMENT";
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return "DEADLINE_EXCEEDED";
-    case grpc::StatusCode::NOT_FOUND: return "NOT_FOUND";
-    case grpc::StatusCode::ALREADY_EXISTS: return "ALREADY_EXISTS";
-    case grpc::StatusCode::PERMISSION_DENIED: return "PERMISSION_DENIED";
-    case grpc::StatusCode::UNAUTHENTICATED: return "UNAUTHENTICATED";
-    case grpc::StatusCode::RESOURCE_EXHAUSTED: return "RESOURCE_EXHAUSTED";
-    case grpc::StatusCode::FAILED_PRECONDITION: return "FAILED_PRECONDITION";
-    case grpc::StatusCode::ABORTED: return "ABORTED";
-    case grpc::StatusCode::OUT_OF_RANGE: return "OUT_OF_RANGE";
-    case grpc::StatusCode::UNIMPLEMENTED: return "UNIMPLEMENTED";
-    case grpc::StatusCode::INTERNAL: return "INTERNAL";
-    case grpc::StatusCode::UNAVAILABLE: return "UNAVAILABLE";
-    case grpc::StatusCode::DATA_LOSS: return "DATA_LOSS";
-    default: return "UNKNOWN";
-  }
 }
 
 void set_deadline(grpc::ClientContext& context, double seconds) {
@@ -132,6 +111,32 @@ void fill_request(std::span<const Ray> rays, uint64_t sequence, const CallOption
   request.set_sequence(sequence);
 }
 
+// The request's hit fields: asked on closest-hit calls only.
+void set_hit_fields(const v1::IntersectResponse*, const CallOptions& options, v1::QueryRequest& request) {
+  request.set_hit_fields(options.hit_fields);
+}
+void set_hit_fields(const v1::OccludedResponse*, const CallOptions&, v1::QueryRequest&) {}
+
+// Bytes of one ray's answer in a reply on the bytes path.
+uint32_t wire_bytes_per_ray(const v1::IntersectResponse*, const CallOptions& options) {
+  return wire::hit_record_bytes(options.hit_fields);
+}
+uint32_t wire_bytes_per_ray(const v1::OccludedResponse*, const CallOptions&) {
+  return 1;
+}
+
+// A reply's answers into `out` (out_bytes_per_ray each): copied as they are,
+// or unpacked into whole Hit records when the reply carries fewer fields.
+void copy_answers(const std::string& answers, uint64_t count, uint32_t wire_bytes, uint32_t out_bytes,
+                  const CallOptions& options, uint8_t* out) {
+  if (wire_bytes == out_bytes) {
+    std::memcpy(out, answers.data(), count * out_bytes);
+    return;
+  }
+  wire::unpack_hit_fields(reinterpret_cast<const uint8_t*>(answers.data()), options.hit_fields,
+                          std::span<Hit>(reinterpret_cast<Hit*>(out), count));
+}
+
 void add_stats(const v1::QueryStats& from, CallStats* to) {
   if (to == nullptr) return;
   ++to->messages;
@@ -176,7 +181,8 @@ Status from_grpc_status(const grpc::Status& status, const std::string& context) 
     case grpc::StatusCode::UNAVAILABLE: code = StatusCode::kIoError; break;
     default: code = StatusCode::kInternal; break;
   }
-  return Status(code, context + ": " + grpc_code_name(status.error_code()) + ": " + status.error_message());
+  return Status(code,
+                context + ": " + wire::grpc_code_name(status.error_code()) + ": " + status.error_message());
 }
 
 SceneClient::SceneClient(std::shared_ptr<grpc::Channel> channel, std::string address)
@@ -189,8 +195,8 @@ Expected<std::unique_ptr<SceneClient>> SceneClient::connect(const std::string& a
   // The server's limit is the one that matters; ours must not be lower.
   arguments.SetMaxReceiveMessageSize(-1);
   arguments.SetMaxSendMessageSize(-1);
-  std::shared_ptr<grpc::Channel> channel =
-      grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), arguments);
+  OUTCORE_ASSIGN_OR_RETURN(std::shared_ptr<grpc::Channel> channel,
+                           make_channel(address, options.security, arguments));
   std::unique_ptr<SceneClient> client(new SceneClient(std::move(channel), address));
   OUTCORE_ASSIGN_OR_RETURN(client->scene_, client->scene_info(options.timeout_seconds));
   const uint64_t max_message =
@@ -512,6 +518,7 @@ Status SceneClient::run_shared(std::span<const Ray> rays, std::span<uint8_t> out
   parallel_copy(out.data(), (*object)->data() + answers_at, n * out_bytes_per_ray);
   give_back_object(std::move(*object));
   add_stats(response.stats(), stats);
+  if (options.progress != nullptr) options.progress->advance(n);
   if (stats != nullptr) stats->shared = true;
   return Status::Ok();
 }
@@ -535,18 +542,25 @@ Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint3
   uint64_t chunk = options.chunk_rays ? std::min(options.chunk_rays, max_chunk_rays_) : max_chunk_rays_;
   if (options.chunk_rays == 0 && n > kStreamAboveRays) chunk = std::min(chunk, kStreamChunkRays);
   const std::string method = method_name(static_cast<const Response*>(nullptr));
+  const uint32_t wire_bytes = wire_bytes_per_ray(static_cast<const Response*>(nullptr), options);
+  if (wire_bytes == 0) {
+    return invalid_argument("CallOptions::hit_fields " + std::to_string(options.hit_fields) +
+                            " is not a HitFields value");
+  }
   grpc::ClientContext context;
   set_deadline(context, options.deadline_seconds);
 
   if (n <= chunk) {
     v1::QueryRequest request;
     fill_request(rays, 0, options, request);
+    set_hit_fields(static_cast<const Response*>(nullptr), options, request);
     Response response;
     const grpc::Status status = call_unary(*stub_, &context, request, &response);
     if (!status.ok()) return from_grpc_status(status, method + " on " + address_);
-    OUTCORE_RETURN_IF_ERROR(check_reply(response, n, out_bytes_per_ray, 0));
-    std::memcpy(out.data(), payload(response).data(), n * out_bytes_per_ray);
+    OUTCORE_RETURN_IF_ERROR(check_reply(response, n, wire_bytes, 0));
+    copy_answers(payload(response), n, wire_bytes, out_bytes_per_ray, options, out.data());
     add_stats(response.stats(), stats);
+    if (options.progress != nullptr) options.progress->advance(n);
     return Status::Ok();
   }
 
@@ -559,6 +573,7 @@ Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint3
     for (uint64_t c = 0; c < chunks; ++c) {
       const uint64_t first = c * chunk;
       fill_request(rays.subspan(first, std::min(chunk, n - first)), c, options, request);
+      set_hit_fields(static_cast<const Response*>(nullptr), options, request);
       if (!stream->Write(request)) return;  // the call ended; Finish() says why
     }
     stream->WritesDone();
@@ -570,10 +585,12 @@ Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint3
     if (!stream->Read(&response)) break;
     const uint64_t first = received * chunk;
     const uint64_t count = std::min(chunk, n - first);
-    reply_status = check_reply(response, count, out_bytes_per_ray, received);
+    reply_status = check_reply(response, count, wire_bytes, received);
     if (!reply_status.ok()) break;
-    std::memcpy(out.data() + first * out_bytes_per_ray, payload(response).data(), count * out_bytes_per_ray);
+    copy_answers(payload(response), count, wire_bytes, out_bytes_per_ray, options,
+                 out.data() + first * out_bytes_per_ray);
     add_stats(response.stats(), stats);
+    if (options.progress != nullptr) options.progress->advance(count);
   }
   // A malformed reply: stop the call so the writer wakes up.
   if (!reply_status.ok()) context.TryCancel();

@@ -35,8 +35,10 @@
 #include <string>
 #include <vector>
 
+#include "client/cpp/secure_channel.h"
 #include "core/query/query_engine.h"
 #include "core/ray/ray_types.h"
+#include "core/util/progress.h"
 #include "core/util/shared_memory.h"
 #include "core/util/status.h"
 #include "outcore/v1/scene_query.grpc.pb.h"
@@ -49,6 +51,8 @@ struct ConnectOptions {
   // Send large batches through shared memory when the server is on this
   // host (see SceneClient); false: always over gRPC.
   bool shared_memory = true;
+  // TLS and the bearer token (secure_channel.h); plaintext without a token by default.
+  ChannelSecurity security;
 };
 
 struct CallOptions {
@@ -63,6 +67,15 @@ struct CallOptions {
   // at most 65,536 (the wire then overlaps tracing). Batches up to one
   // message go unary, larger ones are streamed.
   uint64_t chunk_rays = 0;
+  // intersect(): the hit fields replies carry over the bytes path (fewer
+  // bytes a ray: 4 for t, 12 for t and ids, 32 for all); fields not asked
+  // for are a miss's defaults in `hits` (ids kInvalidId, u = v = 0, zero
+  // normal), so with HIT_FIELDS_T test hits by a finite t. Shared-memory
+  // calls always answer whole records.
+  v1::HitFields hit_fields = v1::HIT_FIELDS_ALL;
+  // Advanced by the rays of each reply as it arrives (a stream's chunk by
+  // chunk; a unary or shared-memory call at its end); null: none.
+  ProgressBar* progress = nullptr;
 };
 
 // Sums of the per-message engine figures of one call.

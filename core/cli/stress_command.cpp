@@ -18,6 +18,7 @@
 #include "core/cli/commands.h"
 #include "core/stress/stress_runner.h"
 #include "core/stress/stress_scenes.h"
+#include "core/util/progress.h"
 
 namespace outcore {
 namespace {
@@ -29,6 +30,7 @@ struct StressArgs {
   bool no_models = false;
   uint32_t stride = 1;
   uint32_t checked = 0;  // 0: 1000 with --quick, else 20000
+  bool quiet = false;
 };
 
 namespace fs = std::filesystem;
@@ -94,6 +96,11 @@ int run_stress_command(const StressArgs& args) {
   const uint32_t max_checked = args.checked != 0 ? args.checked : (args.quick ? 1000 : 20000);
   std::vector<StressRow> rows;
   bool failed = false;
+  ProgressStyle style;
+  style.show_after = kShowProgressAfter;
+  ProgressBar progress("stress", scenes->scenes.size() * configs->size(), "cases", !args.quiet, stderr,
+                       std::move(style));
+  ProgressTicker ticker(progress);
   for (const StressScene& scene : scenes->scenes) {
     const StressReference reference = compute_stress_reference(scene, max_checked);
     for (const StressConfig& config : *configs) {
@@ -103,8 +110,10 @@ int run_stress_command(const StressArgs& args) {
                                     scene.name + ", " + config.name + ": " + row.status().message());
       if (config.must_not_leak && (row->leaks != 0 || row->seam_diffs > 0)) failed = true;
       rows.push_back(*row);
+      progress.advance(1);
     }
   }
+  progress.finish();
   std::fputs(format_stress_table(rows).c_str(), stdout);
   for (const std::string& note : scenes->notes) std::printf("note: %s\n", note.c_str());
   std::printf("%zu cases x %zu configurations in %.1f s\n", scenes->scenes.size(), configs->size(),
@@ -135,6 +144,7 @@ void add_stress_command(CLI::App& app, int& exit_code) {
       ->excludes(models);
   cmd->add_option("--stride", args->stride, "Aim at every N-th vertex and edge midpoint")
       ->capture_default_str();
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress line on stderr (shown for runs over 2 s)");
   cmd->add_option("--checked", args->checked,
                   "Rays per case checked against the float64 brute force (default 1000 quick, 20000 full)");
   cmd->callback([args, &exit_code] { exit_code = run_stress_command(*args); });

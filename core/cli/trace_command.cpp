@@ -16,6 +16,7 @@
 #include "core/query/query_engine.h"
 #include "core/ray/spawn_origin.h"
 #include "core/util/atomic_file.h"
+#include "core/util/progress.h"
 
 namespace outcore {
 
@@ -45,6 +46,7 @@ struct TraceArgs {
   std::string spawn_out;
   std::string spawn_side = "front";
   std::string dynamic_path;
+  bool quiet = false;
 };
 
 // The dynamic layer from --dynamic: the file, and its instances' geometry ids.
@@ -109,6 +111,14 @@ Status run_batches(const TraceArgs& args, QueryEngine& engine, std::span<const R
   const QueryOptions query_options = query_options_of(args);
   answers.occluded.resize(args.any_hit ? rays.size() : 0);
   answers.hits.resize(args.any_hit ? 0 : rays.size());
+  // One engine call answers a whole run: rays done move run by run, while
+  // the ticker keeps time and the bricks built so far current.
+  ProgressStyle style;
+  style.show_after = kShowProgressAfter;
+  style.detail = [&engine] { return std::to_string(engine.cache().counters().builds) + " bricks built"; };
+  ProgressBar progress("trace", rays.size() * static_cast<uint64_t>(args.repeat), "rays", !args.quiet, stderr,
+                       std::move(style));
+  ProgressTicker ticker(progress);
   for (int r = 0; r < args.repeat; ++r) {
     if (dynamic != nullptr && r > 0 && dynamic->file.frames > 1) {
       const uint32_t frame = static_cast<uint32_t>(r) % dynamic->file.frames;
@@ -125,7 +135,9 @@ Status run_batches(const TraceArgs& args, QueryEngine& engine, std::span<const R
       std::fputs(stats.to_text().c_str(), stdout);
     }
     runs.push_back(stats);
+    progress.advance(rays.size());
   }
+  progress.finish();
   return Status::Ok();
 }
 
@@ -237,6 +249,7 @@ void add_trace_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--threads", args->threads, "Worker threads (0, the default: all cores)")
       ->check(CLI::Range(0, kMaxThreadsOption));
   cmd->add_flag("--stats", args->print_stats, "Print query statistics");
+  cmd->add_flag("-q,--quiet", args->quiet, "No progress line on stderr (shown for runs over 2 s)");
   cmd->add_option("--stats-json", args->stats_json_path, "Write query statistics as JSON to this file");
   cmd->add_option("--dynamic", args->dynamic_path,
                   "Dynamic geometry beside the store: meshes and per-frame instance transforms in a .npz "

@@ -2,22 +2,57 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 
 namespace outcore {
 
-ProgressBar::ProgressBar(std::string label, uint64_t total, std::string unit, bool enabled, std::FILE* out)
+ProgressBar::ProgressBar(std::string label, uint64_t total, std::string unit, bool enabled, std::FILE* out,
+                         ProgressStyle style)
     : label_(std::move(label)),
       total_(total),
       unit_(std::move(unit)),
       enabled_(enabled),
       out_(out),
+      style_(std::move(style)),
       is_tty_(enabled && isatty(fileno(out)) != 0),
       start_(std::chrono::steady_clock::now()),
       last_draw_(start_) {}
 
 ProgressBar::~ProgressBar() {
-  if (enabled_ && !finished_ && is_tty_) std::fputc('\n', out_);
+  if (enabled_ && !finished_ && is_tty_ && drawn_) std::fputc('\n', out_);
+}
+
+void ProgressBar::tick() {
+  if (!enabled_) return;
+  std::unique_lock lock(draw_mutex_, std::try_to_lock);
+  if (!lock.owns_lock() || finished_) return;
+  draw(false);
+}
+
+std::string ProgressBar::detail() const {
+  if (!style_.detail) return "";
+  return ", " + style_.detail();
+}
+
+ProgressTicker::ProgressTicker(ProgressBar& bar) : bar_(bar) {
+  thread_ = std::thread([this] {
+    std::unique_lock lock(mutex_);
+    while (!stop_.wait_for(lock, std::chrono::milliseconds(100), [this] { return stopping_; })) {
+      lock.unlock();
+      bar_.tick();
+      lock.lock();
+    }
+  });
+}
+
+ProgressTicker::~ProgressTicker() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  stop_.notify_all();
+  thread_.join();
 }
 
 void ProgressBar::advance(uint64_t amount) {
@@ -41,6 +76,9 @@ void ProgressBar::draw(bool final_line) {
   const double seconds = std::chrono::duration<double>(now - start_).count();
   const double rate = seconds > 0 ? done / seconds : 0.0;
   const double fraction = total_ > 0 ? std::min(1.0, static_cast<double>(done) / total_) : 0.0;
+  // Work shorter than show_after stays silent, its final line included.
+  if (now - start_ < style_.show_after && !drawn_) return;
+  const std::string extra = detail();
   if (is_tty_) {
     if (!final_line && now - last_draw_ < std::chrono::milliseconds(100)) return;
     last_draw_ = now;
@@ -49,18 +87,20 @@ void ProgressBar::draw(bool final_line) {
     for (int i = 0; i < 30; ++i) bar[i] = i < filled ? '=' : (i == filled ? '>' : ' ');
     bar[30] = '\0';
     if (total_ > 0) {
-      std::fprintf(out_, "\r%-12s [%s] %5.1f%% %s/%s %s  %s %s/s  %.1fs\x1b[K", label_.c_str(), bar,
+      std::fprintf(out_, "\r%-12s [%s] %5.1f%% %s/%s %s  %s %s/s  %.1fs%s\x1b[K", label_.c_str(), bar,
                    fraction * 100, human_count(done).c_str(), human_count(total_).c_str(), unit_.c_str(),
-                   human_count(rate).c_str(), unit_.c_str(), seconds);
+                   human_count(rate).c_str(), unit_.c_str(), seconds, extra.c_str());
     } else {
-      std::fprintf(out_, "\r%-12s %s %s  %s %s/s  %.1fs\x1b[K", label_.c_str(), human_count(done).c_str(),
-                   unit_.c_str(), human_count(rate).c_str(), unit_.c_str(), seconds);
+      std::fprintf(out_, "\r%-12s %s %s  %s %s/s  %.1fs%s\x1b[K", label_.c_str(), human_count(done).c_str(),
+                   unit_.c_str(), human_count(rate).c_str(), unit_.c_str(), seconds, extra.c_str());
     }
+    drawn_ = true;
     if (final_line) std::fputc('\n', out_);
     std::fflush(out_);
     return;
   }
-  // Not a terminal: one line per 10% step (or every 10 s when the total is unknown).
+  // Not a terminal: one line per 10% step, and one at least every 10 s (work
+  // that advances in large steps, or whose total is unknown).
   int decile;
   if (total_ > 0) {
     decile = static_cast<int>(fraction * 10);
@@ -69,16 +109,19 @@ void ProgressBar::draw(bool final_line) {
   }
   // Short work stays silent in logs; a final line only closes a reported run.
   if (seconds < 1.0 && last_decile_ < 0) return;
-  if (!final_line && decile <= last_decile_) return;
-  last_decile_ = decile;
+  const bool quiet_for_long = now - last_draw_ >= std::chrono::seconds(10);
+  if (!final_line && decile <= last_decile_ && !quiet_for_long) return;
+  last_decile_ = std::max(decile, last_decile_);
+  last_draw_ = now;
   if (total_ > 0) {
-    std::fprintf(out_, "%s: %3.0f%% %s/%s %s, %s %s/s, %.1fs\n", label_.c_str(), fraction * 100,
-                 human_count(done).c_str(), human_count(total_).c_str(), unit_.c_str(), human_count(rate).c_str(),
-                 unit_.c_str(), seconds);
+    std::fprintf(out_, "%s: %3.0f%% %s/%s %s, %s %s/s, %.1fs%s\n", label_.c_str(), fraction * 100,
+                 human_count(done).c_str(), human_count(total_).c_str(), unit_.c_str(),
+                 human_count(rate).c_str(), unit_.c_str(), seconds, extra.c_str());
   } else {
-    std::fprintf(out_, "%s: %s %s, %s %s/s, %.1fs\n", label_.c_str(), human_count(done).c_str(), unit_.c_str(),
-                 human_count(rate).c_str(), unit_.c_str(), seconds);
+    std::fprintf(out_, "%s: %s %s, %s %s/s, %.1fs%s\n", label_.c_str(), human_count(done).c_str(),
+                 unit_.c_str(), human_count(rate).c_str(), unit_.c_str(), seconds, extra.c_str());
   }
+  drawn_ = true;
   std::fflush(out_);
 }
 

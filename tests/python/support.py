@@ -43,14 +43,16 @@ def run_outcore(*args, timeout=120) -> subprocess.CompletedProcess:
 
 
 class Server:
-    """One `outcore serve` process on 127.0.0.1, port chosen by the OS."""
+    """One `outcore serve` process on 127.0.0.1 (unless extra_args has its
+    own --listen), port chosen by the OS."""
 
     def __init__(self, store: Path, *extra_args):
         self.lines: list[str] = []
         self._ready = threading.Event()
         self.address: str | None = None
+        listen = [] if "--listen" in map(str, extra_args) else ["--listen", "127.0.0.1:0"]
         self.process = subprocess.Popen(
-            [str(binary()), "serve", str(store), "--listen", "127.0.0.1:0", *map(str, extra_args)],
+            [str(binary()), "serve", str(store), *listen, *map(str, extra_args)],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         )
         # Keep draining the output (logs) so the server never blocks on a full pipe.

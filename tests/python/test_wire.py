@@ -137,3 +137,17 @@ def test_decode_reply_reads_occluded_response_and_skips_unknown_fields():
 def test_decode_reply_rejects_malformed_bytes(data):
     with pytest.raises(_wire.WireError):
         _wire.decode_reply(data)
+
+
+def test_hit_fields_encode_as_the_generated_request_and_match_the_proto():
+    assert (_wire.HIT_FIELDS_ALL, _wire.HIT_FIELDS_T, _wire.HIT_FIELDS_T_IDS) == (
+        pb.HIT_FIELDS_ALL, pb.HIT_FIELDS_T, pb.HIT_FIELDS_T_IDS)
+    rays = np.random.default_rng(3).standard_normal((7, 6)).astype("<f4")
+    for fields in (pb.HIT_FIELDS_T, pb.HIT_FIELDS_T_IDS):
+        parsed = pb.QueryRequest.FromString(_wire.encode_query(rays, hit_fields=fields))
+        expected = reference_request(rays)
+        expected.hit_fields = fields
+        assert parsed == expected
+    # The short records are the whole record's leading fields.
+    assert _wire.HIT_T_IDS_DTYPE.names == _wire.HIT_DTYPE.names[:3]
+    assert _wire.HIT_T_DTYPE.names == _wire.HIT_DTYPE.names[:1]

@@ -35,6 +35,12 @@ HIT_DTYPE = np.dtype(
     ]
 )
 assert HIT_DTYPE.itemsize == 32
+# The shorter records of QueryRequest.hit_fields (HIT_FIELDS_T = 1,
+# HIT_FIELDS_T_IDS = 2): a hit record's leading fields, packed.
+HIT_FIELDS_ALL, HIT_FIELDS_T, HIT_FIELDS_T_IDS = 0, 1, 2
+HIT_T_DTYPE = np.dtype([("t_hit", "<f4")])
+HIT_T_IDS_DTYPE = np.dtype([("t_hit", "<f4"), ("geometry_id", "<u4"), ("primitive_id", "<u4")])
+assert HIT_T_IDS_DTYPE.itemsize == 12
 
 # Wire types and tags (field_number << 3 | wire_type).
 _VARINT, _I64, _LEN, _I32 = 0, 1, 2, 5
@@ -44,6 +50,7 @@ _TAG_REQUEST_NO_REORDER = bytes([3 << 3 | _VARINT])
 _TAG_REQUEST_SEQUENCE = bytes([4 << 3 | _VARINT])
 _TAG_REQUEST_SHARED = bytes([5 << 3 | _LEN])
 _TAG_REQUEST_DYNAMIC_VERSION = bytes([6 << 3 | _VARINT])
+_TAG_REQUEST_HIT_FIELDS = bytes([7 << 3 | _VARINT])
 _TAG_BATCH_VERSION = bytes([1 << 3 | _VARINT])
 _TAG_BATCH_LAYOUT = bytes([2 << 3 | _VARINT])
 _TAG_BATCH_COUNT = bytes([3 << 3 | _VARINT])
@@ -105,6 +112,7 @@ def encode_query(
     sequence: int = 0,
     shared: SharedRef | None = None,
     dynamic_version: int | None = None,
+    hit_fields: int = HIT_FIELDS_ALL,
 ) -> bytes:
     """Serialises a QueryRequest for C-contiguous (n, 6|8) '<f4' rays. With
     `shared` the rays are not copied in (batch.rays is omitted: they are in
@@ -134,6 +142,8 @@ def encode_query(
         parts.append(_encode_shared(shared))
     if dynamic_version is not None:
         parts += [_TAG_REQUEST_DYNAMIC_VERSION, varint(dynamic_version)]
+    if hit_fields:
+        parts += [_TAG_REQUEST_HIT_FIELDS, varint(hit_fields)]
     return b"".join(parts)
 
 

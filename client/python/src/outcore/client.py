@@ -51,6 +51,7 @@ import numpy as np
 
 from . import _shared, _wire
 from ._rays import as_wire_rays
+from ._security import make_channel
 from ._messages import add_fields
 from ._messages import message_to_dict as _message_to_dict
 from ._open3d_queries import Open3dQueries, _check_nthreads
@@ -156,14 +157,22 @@ def _rays_with_segment(rays, tnear, tfar) -> tuple[np.ndarray, tuple[int, ...]]:
 class _Query:
     """What differs between closest-hit and any-hit queries."""
 
-    def __init__(self, name: str, record_dtype: np.dtype):
+    def __init__(self, name: str, record_dtype: np.dtype, hit_fields: int = _wire.HIT_FIELDS_ALL):
         self.unary = f"/{_SERVICE}/{name}"
         self.stream = f"/{_SERVICE}/{name}Stream"
         self.record_dtype = np.dtype(record_dtype)
+        self.hit_fields = hit_fields
 
 
 _INTERSECT = _Query("Intersect", _wire.HIT_DTYPE)
 _OCCLUDED = _Query("Occluded", np.uint8)
+# cast_rays(hit_fields=...): the query, and the keys of its answer.
+_CAST_FIELDS = {
+    "all": (_INTERSECT, ("t_hit", "geometry_ids", "primitive_ids", "primitive_uvs", "primitive_normals")),
+    "t": (_Query("Intersect", _wire.HIT_T_DTYPE, _wire.HIT_FIELDS_T), ("t_hit",)),
+    "t_ids": (_Query("Intersect", _wire.HIT_T_IDS_DTYPE, _wire.HIT_FIELDS_T_IDS),
+              ("t_hit", "geometry_ids", "primitive_ids")),
+}
 
 
 class SceneClient(Open3dQueries):
@@ -177,10 +186,15 @@ class SceneClient(Open3dQueries):
     shared_memory: pass batches of >= 16,384 rays through a shared-memory
     segment when the server is on this host and accepts it (module
     docstring); False always sends bytes. Only with chunk_rays None.
+    tls_ca: connect with TLS, trusting this CA (a path to a PEM file, or the
+    PEM bytes); tls_cert and tls_key: a client certificate for servers that
+    require one (serve --tls-client-ca). token: sent as "authorization:
+    Bearer TOKEN" on every call (serve --auth-token-file). All keyword-only.
     """
 
     def __init__(self, address: str, timeout: float | None = None, max_message_mb: float = 64,
-                 chunk_rays: int | None = None, shared_memory: bool = True):
+                 chunk_rays: int | None = None, shared_memory: bool = True, *, tls_ca=None, tls_cert=None,
+                 tls_key=None, token: str | None = None):
         if not isinstance(address, str) or not address:
             raise ValueError(f"address must be a non-empty 'host:port' string, got {address!r}")
         if timeout is not None and not (timeout > 0 and math.isfinite(timeout)):
@@ -207,12 +221,13 @@ class SceneClient(Open3dQueries):
         self._last_call_shared = False
         self._max_message_bytes = min(int(max_message_mb * _MIB), _GRPC_MAX_LENGTH)
         self._server_max_message_bytes: int | None = None
-        self._channel = grpc.insecure_channel(
+        self._channel = make_channel(
             address,
-            options=[
+            [
                 ("grpc.max_send_message_length", self._max_message_bytes),
                 ("grpc.max_receive_message_length", self._max_message_bytes),
             ],
+            tls_ca=tls_ca, tls_cert=tls_cert, tls_key=tls_key, token=token,
         )
         # Serializers None: requests and replies pass as raw bytes (see _wire).
         self._calls = {
@@ -293,7 +308,7 @@ class SceneClient(Open3dQueries):
     # -- queries ----------------------------------------------------------
 
     def cast_rays(self, rays, *, nthreads: int = 0, strict: bool = False,
-                  dynamic_version: int | None = None) -> dict:
+                  dynamic_version: int | None = None, hit_fields: str = "all") -> dict:
         """Closest hit of each ray, as Open3D's RaycastingScene.cast_rays.
 
         rays: (..., 6) [ox oy oz dx dy dz] or (..., 8) [... tnear tfar]
@@ -311,19 +326,27 @@ class SceneClient(Open3dQueries):
         dynamic layer's version to trace (see add_mesh), the latest if None;
         one no longer kept is OutcoreError NOT_FOUND. The version the answers
         saw is then in last_dynamic_version. nthreads: accepted for Open3D's
-        signature and ignored (the server's --threads decide). Options are
-        keyword-only.
+        signature and ignored (the server's --threads decide). hit_fields:
+        "all" (the default, Open3D's five keys, 32 bytes a ray on the wire),
+        "t_ids" (t_hit, geometry_ids, primitive_ids: 12 bytes) or "t" (t_hit
+        only: 4 bytes), to cut reply bytes for a client on another host; the
+        dict then holds only those keys (a shared-memory call fetches whole
+        records and returns the same keys). Options are keyword-only.
         """
         _check_nthreads(nthreads)
+        if hit_fields not in _CAST_FIELDS:
+            raise ValueError(f"hit_fields must be one of {sorted(_CAST_FIELDS)}, got {hit_fields!r}")
+        query, keys = _CAST_FIELDS[hit_fields]
         flat, batch_shape = as_wire_rays(rays)
-        hits = self._query(_INTERSECT, flat, _QueryOptions(strict, _check_version(dynamic_version)))
-        return {
-            "t_hit": hits["t_hit"].reshape(batch_shape),
-            "geometry_ids": hits["geometry_id"].reshape(batch_shape),
-            "primitive_ids": hits["primitive_id"].reshape(batch_shape),
-            "primitive_uvs": hits["uv"].reshape(batch_shape + (2,)),
-            "primitive_normals": hits["ng"].reshape(batch_shape + (3,)),
+        hits = self._query(query, flat, _QueryOptions(strict, _check_version(dynamic_version)))
+        columns = {
+            "t_hit": lambda: hits["t_hit"].reshape(batch_shape),
+            "geometry_ids": lambda: hits["geometry_id"].reshape(batch_shape),
+            "primitive_ids": lambda: hits["primitive_id"].reshape(batch_shape),
+            "primitive_uvs": lambda: hits["uv"].reshape(batch_shape + (2,)),
+            "primitive_normals": lambda: hits["ng"].reshape(batch_shape + (3,)),
         }
+        return {key: columns[key]() for key in keys}
 
     def test_occlusions(self, rays, tnear: float = 0.0, tfar: float = math.inf, *, nthreads: int = 0,
                         strict: bool = False, dynamic_version: int | None = None) -> np.ndarray:
@@ -462,7 +485,8 @@ class SceneClient(Open3dQueries):
             self._last_call_shared = False
             return out
         if self._shared_wanted(n):
-            out = self._query_shared(query, rays, opts)
+            # Shared answers are whole records whatever fields were asked.
+            out = self._query_shared(_INTERSECT if query.hit_fields else query, rays, opts)
             if out is not None:
                 return out
             # The server refused the segment or none could be made: shared
@@ -502,7 +526,8 @@ class SceneClient(Open3dQueries):
         return reply
 
     def _query_unary(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
-        request = _wire.encode_query(rays, strict=opts.strict, dynamic_version=opts.dynamic_version)
+        request = _wire.encode_query(rays, strict=opts.strict, dynamic_version=opts.dynamic_version,
+                                     hit_fields=query.hit_fields)
         try:
             data = self._calls[query.unary](request, timeout=self.timeout)
         except grpc.RpcError as e:
@@ -576,7 +601,7 @@ class SceneClient(Open3dQueries):
         # few are held at once, not a second copy of the batch.
         requests = (
             _wire.encode_query(rays[start : start + chunk], strict=opts.strict, sequence=sequence,
-                               dynamic_version=opts.dynamic_version)
+                               dynamic_version=opts.dynamic_version, hit_fields=query.hit_fields)
             for sequence, start in enumerate(starts)
         )
         out = np.empty(n, dtype=query.record_dtype)
