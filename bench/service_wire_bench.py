@@ -15,8 +15,10 @@ median of each):
 - Python client: SceneClient(shared_memory=False).cast_rays(rays,
   hit_fields=F);
 - Open3D: RaycastingScene.cast_rays on the triangles read back from the store;
-- scrape: the C++ all-fields call again while a thread GETs /metrics every
-  100 ms (10 Hz: 150 times Prometheus' default 15 s interval).
+- scrape: 5 C++ all-fields calls in one process, then 5 more while a thread
+  GETs /metrics every 100 ms (10 Hz: 150 times Prometheus' default 15 s
+  interval), their medians compared; and the wall time of one scrape of an
+  idle server (median of 500), an upper bound of its cost.
 Answers of every field set are checked equal to the all-fields answer's
 fields. Ratios > 1: faster than Open3D in process.
 
@@ -45,11 +47,11 @@ from trace_bench import SCENES, open3d_cast  # noqa: E402
 FIELDS = {"all": "all", "t,ids": "t_ids", "t": "t"}  # CLI name -> Python name
 
 
-def cpp_call(address, rays_path, out, fields):
-    """Wall seconds of the second of two calls (the first warms the channel)."""
-    text = run([OUTCORE, "query", "--server", address, "--rays", rays_path, "-o", out, "--repeat", "2",
+def cpp_call(address, rays_path, out, fields, calls=1):
+    """Median wall seconds of `calls` calls after a first one that warms the channel."""
+    text = run([OUTCORE, "query", "--server", address, "--rays", rays_path, "-o", out, "--repeat", str(calls + 1),
                 "--no-shared-memory", "--hit-fields", fields, "-q"])
-    return [float(s) for s in re.findall(r"call \d+/\d+ seconds (\S+)", text)][-1]
+    return statistics.median([float(s) for s in re.findall(r"call \d+/\d+ seconds (\S+)", text)][1:])
 
 
 def python_call(client, rays, fields):
@@ -78,6 +80,18 @@ class Scraper:
         self._thread.join()
 
 
+def scrape_seconds(address, scrapes=500):
+    """Median wall seconds of one GET /metrics from an idle client: an upper
+    bound of the server's work per scrape (HTTP and the client included)."""
+    times = []
+    for _ in range(scrapes):
+        t0 = time.perf_counter()
+        with urllib.request.urlopen(f"http://{address}/metrics", timeout=10) as reply:
+            reply.read()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
 def wire_bytes(client, rays, fields):
     from outcore import _wire
     codes = {"all": _wire.HIT_FIELDS_ALL, "t_ids": _wire.HIT_FIELDS_T_IDS, "t": _wire.HIT_FIELDS_T}
@@ -88,7 +102,8 @@ def wire_bytes(client, rays, fields):
 
 def measure(server, client, store, tris, rays_path, rays, runs, work, tag):
     n = len(rays)
-    times = {k: [] for k in ["o3d", "cpp_scraped"] + [f"cpp_{f}" for f in FIELDS] + [f"py_{f}" for f in FIELDS]}
+    times = {k: [] for k in ["o3d", "cpp_scraped", "cpp_unscraped"] + [f"cpp_{f}" for f in FIELDS] +
+             [f"py_{f}" for f in FIELDS]}
     outs = {f: os.path.join(work, f"{tag}-{f.replace(',', '_')}.npy") for f in FIELDS}
     run([OUTCORE, "query", "--server", server.address, "--rays", rays_path, "-o", outs["all"], "-q"])  # warm-up
     results = {}
@@ -98,8 +113,10 @@ def measure(server, client, store, tris, rays_path, rays, runs, work, tag):
             times[f"cpp_{f}"].append(cpp_call(server.address, rays_path, outs[f], f))
             seconds, results[py_name] = python_call(client, rays, py_name)
             times[f"py_{f}"].append(seconds)
+        # Sustained load (several calls in one process), scraped and not, back to back.
+        times["cpp_unscraped"].append(cpp_call(server.address, rays_path, outs["all"], "all", calls=5))
         scraper = Scraper(server.metrics)
-        times["cpp_scraped"].append(cpp_call(server.address, rays_path, outs["all"], "all"))
+        times["cpp_scraped"].append(cpp_call(server.address, rays_path, outs["all"], "all", calls=5))
         scraper.stop()
         scrapes += scraper.scrapes
         times["o3d"].append(open3d_cast(tris, rays, 1)[0])
@@ -114,7 +131,7 @@ def measure(server, client, store, tris, rays_path, rays, runs, work, tag):
             same &= np.array_equal(results[py_name]["primitive_ids"], full["primitive_id"])
     med = {k: statistics.median(v) for k, v in times.items()}
     row = dict(rays=n, open3d_Mrays=n / med["o3d"] / 1e6, same_answers=bool(same), scrapes=scrapes,
-               scraped_vs_unscraped=med["cpp_all"] / med["cpp_scraped"], load_avg=os.getloadavg()[0])
+               scraped_vs_unscraped=med["cpp_unscraped"] / med["cpp_scraped"], load_avg=os.getloadavg()[0])
     for f in FIELDS:
         key = f.replace(",", "_")
         row[f"cpp_{key}_Mrays"] = n / med[f"cpp_{f}"] / 1e6
@@ -137,7 +154,7 @@ def main():
     OUTCORE = remote_bench.OUTCORE = os.path.abspath(a.outcore)
     import outcore
     os.makedirs(a.work, exist_ok=True)
-    rows, wire = [], {}
+    rows, wire, scrape_s = [], {}, None
     for name in a.scenes.split(","):
         store, info = prepare_store(OUTCORE, a.work, name, SCENES[name])
         tris, _ = read_store_triangles(store)
@@ -155,6 +172,7 @@ def main():
                     print(json.dumps(row), flush=True)
                     if not wire:
                         wire = {f: wire_bytes(client, rays[:1000], f) for f in FIELDS.values()}
+                        scrape_s = scrape_seconds(server.metrics)
         finally:
             server.stop()
     print(f"\n{a.rays:,}-ray batches over the gRPC bytes path on loopback, medians of {a.runs} interleaved "
@@ -167,11 +185,14 @@ def main():
               f"{r['cpp_t_ids_vs_open3d']:.2f}x | {r['cpp_t_vs_open3d']:.2f}x | {r['python_all_vs_open3d']:.2f}x | "
               f"{r['python_t_ids_vs_open3d']:.2f}x | {r['python_t_vs_open3d']:.2f}x | "
               f"{r['scraped_vs_unscraped']:.3f}x ({r['scrapes']} scrapes) | {'yes' if r['same_answers'] else 'NO'} |")
+    print(f"\none GET /metrics (idle server, median of 500): {scrape_s * 1e3:.3f} ms wall, i.e. at most "
+          f"{scrape_s / 15 * 100:.4f} % of one core at Prometheus' default 15 s interval, "
+          f"{scrape_s * 10 * 100:.2f} % at 10 Hz")
     print("\nbytes on the wire per ray (1000-ray Intersect, protobuf framing included): " +
           ", ".join(f"{f}: request {q:.2f}, reply {p:.2f}" for f, (q, p) in wire.items()))
     if a.json:
         with open(a.json, "w") as f:
-            json.dump(dict(rows=rows, wire_bytes_per_ray=wire), f, indent=1)
+            json.dump(dict(rows=rows, wire_bytes_per_ray=wire, scrape_seconds=scrape_s), f, indent=1)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,8 @@
 #include "client/cpp/scene_client.h"
 
 #include <grpcpp/grpcpp.h>
+#include <grpcpp/impl/client_unary_call.h>
+#include <grpcpp/impl/rpc_method.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
@@ -13,6 +15,7 @@
 #include <string_view>
 #include <thread>
 
+#include "client/cpp/raw_query_messages.h"
 #include "core/util/loopback_address.h"
 #include "proto/outcore/v1/grpc_code_names.h"
 #include "proto/outcore/v1/hit_fields_wire.h"
@@ -80,12 +83,6 @@ grpc::Status call_unary(v1::SceneQuery::Stub& stub, grpc::ClientContext* context
                         const v1::QueryRequest& request, v1::OccludedResponse* response) {
   return stub.Occluded(context, request, response);
 }
-auto open_stream(v1::SceneQuery::Stub& stub, grpc::ClientContext* context, const v1::IntersectResponse*) {
-  return stub.IntersectStream(context);
-}
-auto open_stream(v1::SceneQuery::Stub& stub, grpc::ClientContext* context, const v1::OccludedResponse*) {
-  return stub.OccludedStream(context);
-}
 const std::string& payload(const v1::IntersectResponse& response) {
   return response.hits();
 }
@@ -111,30 +108,18 @@ void fill_request(std::span<const Ray> rays, uint64_t sequence, const CallOption
   request.set_sequence(sequence);
 }
 
-// The request's hit fields: asked on closest-hit calls only.
-void set_hit_fields(const v1::IntersectResponse*, const CallOptions& options, v1::QueryRequest& request) {
-  request.set_hit_fields(options.hit_fields);
-}
-void set_hit_fields(const v1::OccludedResponse*, const CallOptions&, v1::QueryRequest&) {}
-
 // Bytes of one ray's answer in a reply on the bytes path.
+v1::HitFields hit_fields_of(const v1::IntersectResponse*, const CallOptions& options) {
+  return options.hit_fields;
+}
+v1::HitFields hit_fields_of(const v1::OccludedResponse*, const CallOptions&) {
+  return v1::HIT_FIELDS_ALL;
+}
 uint32_t wire_bytes_per_ray(const v1::IntersectResponse*, const CallOptions& options) {
   return wire::hit_record_bytes(options.hit_fields);
 }
 uint32_t wire_bytes_per_ray(const v1::OccludedResponse*, const CallOptions&) {
   return 1;
-}
-
-// A reply's answers into `out` (out_bytes_per_ray each): copied as they are,
-// or unpacked into whole Hit records when the reply carries fewer fields.
-void copy_answers(const std::string& answers, uint64_t count, uint32_t wire_bytes, uint32_t out_bytes,
-                  const CallOptions& options, uint8_t* out) {
-  if (wire_bytes == out_bytes) {
-    std::memcpy(out, answers.data(), count * out_bytes);
-    return;
-  }
-  wire::unpack_hit_fields(reinterpret_cast<const uint8_t*>(answers.data()), options.hit_fields,
-                          std::span<Hit>(reinterpret_cast<Hit*>(out), count));
 }
 
 void add_stats(const v1::QueryStats& from, CallStats* to) {
@@ -143,18 +128,30 @@ void add_stats(const v1::QueryStats& from, CallStats* to) {
   wire::add_to_wire(wire::from_wire(from), &to->engine);
 }
 
-// A reply must answer exactly the rays its request sent.
-template <class Response>
-Status check_reply(const Response& response, uint64_t rays, uint32_t bytes_per_ray, uint64_t sequence) {
-  if (response.layout_version() != 1 || response.ray_count() != rays ||
-      payload(response).size() != rays * bytes_per_ray || response.sequence() != sequence) {
-    return internal_error("the server's reply to message " + std::to_string(sequence) +
-                          " is malformed: layout " + std::to_string(response.layout_version()) + ", " +
-                          std::to_string(response.ray_count()) + " rays in " +
-                          std::to_string(payload(response).size()) + " bytes, sequence " +
-                          std::to_string(response.sequence()) + " (expected " + std::to_string(rays) +
-                          " rays, sequence " + std::to_string(sequence) + ")");
+// A bytes-path reply to `count` rays: checked, its answers copied to `out`
+// (unpacked into Hit records through `scratch` when it carries fewer
+// fields), its figures added to `stats` and its rays to `progress`.
+Status take_reply(const RawQueryReply& reply, uint64_t count, uint64_t sequence, uint32_t wire_bytes,
+                  uint32_t out_bytes, v1::HitFields fields, uint8_t* out, std::vector<uint8_t>& scratch,
+                  CallStats* stats, ProgressBar* progress) {
+  const bool packed = wire_bytes != out_bytes;
+  if (packed) scratch.resize(count * wire_bytes);
+  ReplyHeader header;
+  OUTCORE_RETURN_IF_ERROR(decode_query_reply(
+      reply, std::span<uint8_t>(packed ? scratch.data() : out, count * wire_bytes), header));
+  if (header.layout_version != 1 || header.ray_count != count || header.answer_bytes != count * wire_bytes ||
+      header.sequence != sequence || header.answers_in_shared) {
+    return internal_error(
+        "the server's reply to message " + std::to_string(sequence) + " is malformed: layout " +
+        std::to_string(header.layout_version) + ", " + std::to_string(header.ray_count) + " rays in " +
+        std::to_string(header.answer_bytes) + " bytes, sequence " + std::to_string(header.sequence) +
+        " (expected " + std::to_string(count) + " rays in " + std::to_string(count * wire_bytes) +
+        " bytes, sequence " + std::to_string(sequence) + ")");
   }
+  if (packed)
+    wire::unpack_hit_fields(scratch.data(), fields, std::span<Hit>(reinterpret_cast<Hit*>(out), count));
+  add_stats(header.stats, stats);
+  if (progress != nullptr) progress->advance(count);
   return Status::Ok();
 }
 
@@ -550,47 +547,57 @@ Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint3
   grpc::ClientContext context;
   set_deadline(context, options.deadline_seconds);
 
+  const std::string path = "/" + std::string(v1::SceneQuery::service_full_name()) + "/" + method;
+  QueryRequestFields fields;
+  fields.strict = options.strict;
+  fields.no_reorder = options.no_reorder;
+  fields.hit_fields = hit_fields_of(static_cast<const Response*>(nullptr), options);
+  std::vector<uint8_t> scratch;  // packed answers, when fewer fields than a Hit's come
+  const auto take = [&](const RawQueryReply& reply, uint64_t first, uint64_t count, uint64_t sequence) {
+    return take_reply(reply, count, sequence, wire_bytes, out_bytes_per_ray, fields.hit_fields,
+                      out.data() + first * out_bytes_per_ray, scratch, stats, options.progress);
+  };
+
   if (n <= chunk) {
-    v1::QueryRequest request;
-    fill_request(rays, 0, options, request);
-    set_hit_fields(static_cast<const Response*>(nullptr), options, request);
-    Response response;
-    const grpc::Status status = call_unary(*stub_, &context, request, &response);
+    const RawQueryRequest request = encode_query_request(rays, fields);
+    RawQueryReply reply;
+    const grpc::Status status = grpc::internal::BlockingUnaryCall<RawQueryRequest, RawQueryReply>(
+        channel_.get(),
+        grpc::internal::RpcMethod(path.c_str(), grpc::internal::RpcMethod::NORMAL_RPC, channel_), &context,
+        request, &reply);
     if (!status.ok()) return from_grpc_status(status, method + " on " + address_);
-    OUTCORE_RETURN_IF_ERROR(check_reply(response, n, wire_bytes, 0));
-    copy_answers(payload(response), n, wire_bytes, out_bytes_per_ray, options, out.data());
-    add_stats(response.stats(), stats);
-    if (options.progress != nullptr) options.progress->advance(n);
-    return Status::Ok();
+    return take(reply, 0, n, 0);
   }
 
   const uint64_t chunks = (n + chunk - 1) / chunk;
-  auto stream = open_stream(*stub_, &context, static_cast<const Response*>(nullptr));
+  const std::string stream_path = path + "Stream";
+  std::unique_ptr<grpc::ClientReaderWriter<RawQueryRequest, RawQueryReply>> stream(
+      grpc::internal::ClientReaderWriterFactory<RawQueryRequest, RawQueryReply>::Create(
+          channel_.get(),
+          grpc::internal::RpcMethod(stream_path.c_str(), grpc::internal::RpcMethod::BIDI_STREAMING, channel_),
+          &context));
   // Writing on a second thread keeps the next chunks flowing (up to gRPC's
   // flow-control window) while this thread waits for and copies out replies.
   std::thread writer([&] {
-    v1::QueryRequest request;
+    QueryRequestFields chunk_fields = fields;
     for (uint64_t c = 0; c < chunks; ++c) {
       const uint64_t first = c * chunk;
-      fill_request(rays.subspan(first, std::min(chunk, n - first)), c, options, request);
-      set_hit_fields(static_cast<const Response*>(nullptr), options, request);
-      if (!stream->Write(request)) return;  // the call ended; Finish() says why
+      chunk_fields.sequence = c;
+      if (!stream->Write(
+              encode_query_request(rays.subspan(first, std::min(chunk, n - first)), chunk_fields))) {
+        return;  // the call ended; Finish() says why
+      }
     }
     stream->WritesDone();
   });
   Status reply_status;
-  Response response;
+  RawQueryReply reply;
   uint64_t received = 0;
   for (; received < chunks; ++received) {
-    if (!stream->Read(&response)) break;
+    if (!stream->Read(&reply)) break;
     const uint64_t first = received * chunk;
-    const uint64_t count = std::min(chunk, n - first);
-    reply_status = check_reply(response, count, wire_bytes, received);
+    reply_status = take(reply, first, std::min(chunk, n - first), received);
     if (!reply_status.ok()) break;
-    copy_answers(payload(response), count, wire_bytes, out_bytes_per_ray, options,
-                 out.data() + first * out_bytes_per_ray);
-    add_stats(response.stats(), stats);
-    if (options.progress != nullptr) options.progress->advance(count);
   }
   // A malformed reply: stop the call so the writer wakes up.
   if (!reply_status.ok()) context.TryCancel();
