@@ -141,6 +141,27 @@ def measure(server, client, store, tris, rays_path, rays, runs, work, tag):
     return row
 
 
+def plot(rows, path):
+    """Bars of each row's ratios against Open3D, the 0.8x target drawn."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    series = [(f"{client} {f}", f"{key}_{f.replace(',', '_')}_vs_open3d")
+              for client, key in (("C++", "cpp"), ("Python", "python")) for f in FIELDS]
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    width = 0.8 / len(series)
+    for k, (label, key) in enumerate(series):
+        ax.bar([i + k * width for i in range(len(rows))], [r[key] for r in rows], width, label=label)
+    ax.axhline(0.8, color="black", linestyle="--", linewidth=1, label="target 0.8x")
+    ax.set_xticks([i + 0.4 - width / 2 for i in range(len(rows))], [f"{r['scene']} {r['kind']}" for r in rows])
+    ax.set_ylabel("throughput / Open3D in process")
+    ax.set_title("gRPC bytes path on loopback, 1 M rays, by hit fields in the reply")
+    ax.legend(ncol=4, fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
+
+
 def main():
     global OUTCORE
     ap = argparse.ArgumentParser()
@@ -150,7 +171,13 @@ def main():
     ap.add_argument("--work", default=os.path.join(ROOT, "build", "bench-service-wire"))
     ap.add_argument("--outcore", default=OUTCORE)
     ap.add_argument("--json")
+    ap.add_argument("--png", help="bar chart of the ratios (matplotlib)")
+    ap.add_argument("--plot-only", metavar="JSON", help="only draw --png from an earlier run's --json")
     a = ap.parse_args()
+    if a.plot_only:
+        with open(a.plot_only) as f:
+            plot(json.load(f)["rows"], a.png)
+        return
     OUTCORE = remote_bench.OUTCORE = os.path.abspath(a.outcore)
     import outcore
     os.makedirs(a.work, exist_ok=True)
@@ -193,6 +220,8 @@ def main():
     if a.json:
         with open(a.json, "w") as f:
             json.dump(dict(rows=rows, wire_bytes_per_ray=wire, scrape_seconds=scrape_s), f, indent=1)
+    if a.png:
+        plot(rows, a.png)
 
 
 if __name__ == "__main__":
