@@ -49,7 +49,7 @@ from typing import NamedTuple
 import grpc
 import numpy as np
 
-from . import _shared, _wire
+from . import _routing, _shared, _wire
 from ._rays import as_wire_rays
 from ._security import make_channel
 from ._messages import add_fields
@@ -192,9 +192,26 @@ class SceneClient(Open3dQueries):
     Bearer TOKEN" on every call (serve --auth-token-file). All keyword-only.
     """
 
-    def __init__(self, address: str, timeout: float | None = None, max_message_mb: float = 64,
+    def __init__(self, address, timeout: float | None = None, max_message_mb: float = 64,
                  chunk_rays: int | None = None, shared_memory: bool = True, *, tls_ca=None, tls_cert=None,
-                 tls_key=None, token: str | None = None):
+                 tls_key=None, token: str | None = None, route_cells: int = 4, load_factor: float = 1.25):
+        self._router = None
+        if isinstance(address, (list, tuple)) or (isinstance(address, str) and address.startswith("dns:")):
+            targets = [address] if isinstance(address, str) else list(address)
+            if not targets or not all(isinstance(t, str) and t for t in targets):
+                raise ValueError(f"replicas must be a non-empty list of 'host:port' strings, got {address!r}")
+            if isinstance(route_cells, bool) or not isinstance(route_cells, int) or not 1 <= route_cells <= 64:
+                raise ValueError(f"route_cells must be an int in 1..64, got {route_cells!r}")
+            if not (load_factor >= 1 and math.isfinite(load_factor)):
+                raise ValueError(f"load_factor must be a number >= 1, got {load_factor!r}")
+            options = dict(timeout=timeout, max_message_mb=max_message_mb, chunk_rays=chunk_rays,
+                           shared_memory=shared_memory, tls_ca=tls_ca, tls_cert=tls_cert, tls_key=tls_key,
+                           token=token)
+            self._router = _routing.Router(targets, lambda replica: SceneClient(replica, **options),
+                                           cells=route_cells, load_factor=load_factor)
+            # Calls other than the ray queries go to one replica (the same
+            # answer on any); the dynamic layer is refused (it is per server).
+            address = self._router.replicas()[0]
         if not isinstance(address, str) or not address:
             raise ValueError(f"address must be a non-empty 'host:port' string, got {address!r}")
         if timeout is not None and not (timeout > 0 and math.isfinite(timeout)):
@@ -279,6 +296,8 @@ class SceneClient(Open3dQueries):
         still in use by a running call goes when that call ends)."""
         self._shared_pool.close()
         self._channel.close()
+        if self._router is not None:
+            self._router.close()
 
     def __del__(self):
         # Best effort for clients never closed; weakref finalizers in _shared
@@ -406,6 +425,7 @@ class SceneClient(Open3dQueries):
         INVALID_ARGUMENT naming it, and changes nothing."""
         v = _vertex_array(vertices, "vertices")
         t = _index_array(triangles, "triangles")
+        self._refuse_dynamic_on_replicas()
         reply = self._call_plain(self._dynamic_calls["AddMesh"], pb.AddMeshRequest(
             vertex_count=v.shape[0], vertices=v.tobytes(), triangle_count=t.shape[0], triangles=t.tobytes()),
             "AddMesh")
@@ -418,6 +438,7 @@ class SceneClient(Open3dQueries):
         Returns the instance's geometry id (hits report it; ids continue after
         the packed inputs' and are never reused)."""
         rows = _transforms(np.eye(3, 4) if transform is None else transform, 1, "transform")
+        self._refuse_dynamic_on_replicas()
         reply = self._call_plain(self._dynamic_calls["AddInstance"], pb.AddInstanceRequest(
             mesh_id=_uint32(mesh_id, "mesh_id"), transform=rows.tolist()), "AddInstance")
         self.last_dynamic_version = reply.version
@@ -428,6 +449,7 @@ class SceneClient(Open3dQueries):
         (all or nothing). Returns the new version."""
         ids = np.asarray(geometry_ids).reshape(-1)
         rows = _transforms(transforms, ids.shape[0], "transforms")
+        self._refuse_dynamic_on_replicas()
         reply = self._call_plain(self._dynamic_calls["UpdateTransforms"], pb.UpdateTransformsRequest(
             geometry_ids=[_uint32(i, "geometry_ids") for i in ids.tolist()], transforms=rows.tolist()),
             "UpdateTransforms")
@@ -438,6 +460,7 @@ class SceneClient(Open3dQueries):
         """New positions for every vertex of a mesh ((N, 3), the same N: its
         topology is fixed); its instances move with it. Returns the new version."""
         v = _vertex_array(vertices, "vertices")
+        self._refuse_dynamic_on_replicas()
         reply = self._call_plain(self._dynamic_calls["UpdateVertices"], pb.UpdateVerticesRequest(
             mesh_id=_uint32(mesh_id, "mesh_id"), vertex_count=v.shape[0], vertices=v.tobytes()),
             "UpdateVertices")
@@ -446,6 +469,7 @@ class SceneClient(Open3dQueries):
 
     def remove(self, geometry_id: int) -> int:
         """Removes an instance (its mesh stays). Returns the new version."""
+        self._refuse_dynamic_on_replicas()
         reply = self._call_plain(self._dynamic_calls["Remove"],
                                  pb.RemoveRequest(geometry_id=_uint32(geometry_id, "geometry_id")), "Remove")
         self.last_dynamic_version = reply.version
@@ -477,6 +501,8 @@ class SceneClient(Open3dQueries):
 
     def _query(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
         """Answers (n, 6|8) wire rays: an (n,) array of query.record_dtype."""
+        if self._router is not None and rays.shape[0]:
+            return self._routed_query(query, rays, opts)
         n = rays.shape[0]
         if n == 0:
             out = np.empty(0, dtype=query.record_dtype)
@@ -495,6 +521,35 @@ class SceneClient(Open3dQueries):
         if n <= chunk:
             return self._query_unary(query, rays, opts)
         return self._query_stream(query, rays, opts, chunk)
+
+    def _routed_query(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
+        """_query over the replicas: parts by routing key, in parallel (_routing)."""
+        def run_part(client, part):
+            answers = client._query(query, np.ascontiguousarray(part), opts)
+            return answers, (client.last_stats, client.last_call_shared, client.last_dynamic_version)
+
+        out = np.empty(rays.shape[0], dtype=query.record_dtype)
+        parts = self._router.query(rays, run_part, out)
+        totals: dict = {}
+        for stats, _, _ in parts:
+            for key, value in (stats or {}).items():
+                if isinstance(value, (int, float)) and not isinstance(value, bool):
+                    totals[key] = totals.get(key, 0) + value
+        self.last_stats = totals
+        self._last_call_shared = any(shared for _, shared, _ in parts)
+        self.last_dynamic_version = max(version for _, _, version in parts)
+        self.last_replicas = len(parts)
+        out.flags.writeable = False
+        return out
+
+    def _refuse_dynamic_on_replicas(self) -> None:
+        if self._router is not None:
+            raise OutcoreError("FAILED_PRECONDITION", "the dynamic layer belongs to one server: with replicas "
+                               "each would hold its own; connect to one replica to change it")
+
+    def replicas(self) -> list[str]:
+        """The replicas' addresses (a replicated client), else [address]."""
+        return self._router.replicas() if self._router is not None else [self.address]
 
     def _check_reply(self, query: _Query, reply: _wire.Reply, expected_rays: int, method: str,
                      sequence: int | None = None, shared: bool = False) -> None:

@@ -1,0 +1,285 @@
+"""Cache-affinity routing over replicas (issue 30): every replica serves the
+whole scene from the same store, so any replica answers any ray the same;
+sending the rays that need the same bricks to the same replica makes the
+replicas' caches add up instead of each holding the whole working set.
+
+- The key of a ray is the cell of a G x G x G grid over the scene's box
+  (SceneInfo bounds) where the ray enters the box (G = 4 by default): rays
+  entering the same region start in the same bricks. Rays that miss the box
+  cost nothing anywhere; they are keyed by blocks of their index so that they
+  spread.
+- Keys go to replicas on a consistent-hash ring (64-bit BLAKE2b, 100 virtual
+  nodes a replica) with bounded load (Mirrokni, Thorup, Zadimoghaddam 2018):
+  a key goes to the first replica clockwise from its hash whose rays stay
+  within load_factor x the average (1.25), so no replica gets far more than
+  its share and a replica joining or leaving moves few keys.
+- The parts go out in parallel and the answers are put back in input order.
+  A part whose replica fails (UNAVAILABLE) goes again to the next replicas on
+  the ring; the failed replica is left out until it has been down for
+  retry_after seconds.
+- Replicas come from a list, or from a "dns:///NAME:PORT" target resolved
+  with getaddrinfo (a Kubernetes headless Service), resolved again when the
+  last resolution is older than resolve_every seconds.
+
+Thread-safety: a Router may be used from several threads; its replica set
+is swapped under a lock.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import socket
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .errors import OutcoreError
+
+VIRTUAL_NODES = 100
+MISS_BLOCK_RAYS = 8192
+
+
+def _hash64(text: str) -> int:
+    return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little")
+
+
+class HashRing:
+    """Replicas (address strings) on a ring of virtual nodes."""
+
+    def __init__(self, replicas, virtual_nodes: int = VIRTUAL_NODES):
+        self.replicas = sorted(set(replicas))
+        points = sorted((_hash64(f"{r}#{i}"), r) for r in self.replicas for i in range(virtual_nodes))
+        self._hashes = np.array([h for h, _ in points], dtype=np.uint64)
+        self._owners = [r for _, r in points]
+
+    def walk(self, key) -> list[str]:
+        """Every replica once, in ring order from the key's hash."""
+        if not self.replicas:
+            return []
+        start = int(np.searchsorted(self._hashes, np.uint64(_hash64(f"key:{key}")))) % len(self._owners)
+        order, seen = [], set()
+        for i in range(len(self._owners)):
+            owner = self._owners[(start + i) % len(self._owners)]
+            if owner not in seen:
+                seen.add(owner)
+                order.append(owner)
+                if len(order) == len(self.replicas):
+                    break
+        return order
+
+    def assign(self, counts: dict, load_factor: float = 1.25) -> dict:
+        """key -> replica for keys with ray counts: each key to the first
+        replica on its walk whose load stays within load_factor x the
+        average (a key larger than that goes to the least loaded one)."""
+        if not self.replicas:
+            return {}
+        total = sum(counts.values())
+        capacity = math.ceil(load_factor * total / len(self.replicas))
+        load = dict.fromkeys(self.replicas, 0)
+        owner = {}
+        # Large keys first, so the small ones fill the gaps they leave.
+        for key in sorted(counts, key=lambda k: (-counts[k], _hash64(f"key:{k}"))):
+            walk = self.walk(key)
+            chosen = next((r for r in walk if load[r] + counts[key] <= capacity), None)
+            if chosen is None:
+                chosen = min(walk, key=lambda r: load[r])
+            owner[key] = chosen
+            load[chosen] += counts[key]
+        return owner
+
+
+def ray_keys(rays: np.ndarray, lo, hi, cells: int = 4) -> np.ndarray:
+    """The routing key of each (n, 6|8) ray: the grid cell where it enters the
+    scene's box, or a negative block key for rays that miss the box."""
+    n = rays.shape[0]
+    lo = np.asarray(lo, dtype=np.float64)
+    hi = np.asarray(hi, dtype=np.float64)
+    o = rays[:, 0:3].astype(np.float64)
+    d = rays[:, 3:6].astype(np.float64)
+    tnear = rays[:, 6].astype(np.float64) if rays.shape[1] == 8 else np.zeros(n)
+    tfar = rays[:, 7].astype(np.float64) if rays.shape[1] == 8 else np.full(n, np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = (lo - o) / d
+        t1 = (hi - o) / d
+    t_enter = np.fmax(np.nanmax(np.fmin(t0, t1), axis=1), tnear)
+    t_exit = np.fmin(np.nanmin(np.fmax(t0, t1), axis=1), tfar)
+    enters = np.isfinite(t_enter) & (t_enter <= t_exit)
+    extent = np.where(hi > lo, hi - lo, 1.0)
+    point = o + np.where(enters, t_enter, 0.0)[:, None] * d
+    cell = np.clip(np.floor((point - lo) / extent * cells), 0, cells - 1)
+    cell = np.nan_to_num(cell, nan=0.0).astype(np.int64)
+    keys = cell[:, 0] + cells * (cell[:, 1] + cells * cell[:, 2])
+    misses = -1 - np.arange(n, dtype=np.int64) // MISS_BLOCK_RAYS
+    return np.where(enters, keys, misses)
+
+
+def resolve(target: str) -> list[str]:
+    """HOST:PORT addresses a "dns:///NAME:PORT" (or "dns:NAME:PORT") target
+    names now; OutcoreError UNAVAILABLE when it resolves to nothing."""
+    name = target.split("dns:", 1)[1].lstrip("/")
+    host, _, port = name.rpartition(":")
+    host = host.strip("[]")
+    try:
+        infos = socket.getaddrinfo(host, int(port), type=socket.SOCK_STREAM)
+    except (socket.gaierror, ValueError) as e:
+        raise OutcoreError("UNAVAILABLE", f"cannot resolve {target}: {e}") from None
+    addresses = []
+    for family, _, _, _, sockaddr in infos:
+        ip = sockaddr[0]
+        address = f"[{ip}]:{port}" if family == socket.AF_INET6 else f"{ip}:{port}"
+        if address not in addresses:
+            addresses.append(address)
+    if not addresses:
+        raise OutcoreError("UNAVAILABLE", f"{target} resolves to no address")
+    return sorted(addresses)
+
+
+class Router:
+    """Routes the ray queries of a replicated SceneClient (see the module)."""
+
+    def __init__(self, targets, make_client, cells: int = 4, load_factor: float = 1.25,
+                 resolve_every: float = 30.0, retry_after: float = 30.0):
+        self._targets = list(targets)
+        self._make_client = make_client
+        self.cells = cells
+        self.load_factor = load_factor
+        self.resolve_every = resolve_every
+        self.retry_after = retry_after
+        self._lock = threading.Lock()
+        self._clients: dict[str, object] = {}
+        self._down: dict[str, float] = {}  # replica -> when it failed
+        self._resolved_at = -math.inf
+        self._bounds = None
+        #: Parts sent again to another replica after theirs failed.
+        self.failovers = 0
+        self._pool = ThreadPoolExecutor(max_workers=16, thread_name_prefix="outcore-route")
+        self._refresh(force=True)
+
+    # -- the replica set ----------------------------------------------------
+
+    def _addresses(self) -> list[str]:
+        addresses = []
+        for target in self._targets:
+            for address in (resolve(target) if target.startswith("dns:") else [target]):
+                if address not in addresses:
+                    addresses.append(address)
+        return addresses
+
+    def _refresh(self, force: bool = False) -> None:
+        now = time.monotonic()
+        if not force and now - self._resolved_at < self.resolve_every:
+            return
+        addresses = self._addresses()
+        with self._lock:
+            for gone in set(self._clients) - set(addresses):
+                self._clients.pop(gone).close()
+            for address in addresses:
+                if address not in self._clients:
+                    self._clients[address] = self._make_client(address)
+            self._resolved_at = now
+
+    def replicas(self) -> list[str]:
+        with self._lock:
+            return sorted(self._clients)
+
+    def client(self, address: str):
+        with self._lock:
+            return self._clients[address]
+
+    def any_client(self):
+        """A live replica's client (for calls whose answer is the same on all)."""
+        live = self._live()
+        if not live:
+            raise OutcoreError("UNAVAILABLE", "no replica is up")
+        return self.client(live[0])
+
+    def _live(self) -> list[str]:
+        now = time.monotonic()
+        with self._lock:
+            for address, when in list(self._down.items()):
+                if now - when >= self.retry_after:
+                    del self._down[address]
+            return sorted(a for a in self._clients if a not in self._down)
+
+    def _mark_down(self, address: str) -> None:
+        with self._lock:
+            self._down[address] = time.monotonic()
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True)
+        with self._lock:
+            for client in self._clients.values():
+                client.close()
+            self._clients.clear()
+
+    # -- routing --------------------------------------------------------------
+
+    def plan(self, rays: np.ndarray) -> tuple[HashRing, np.ndarray, list[str]]:
+        """The ring over the live replicas, each ray's replica index, and the
+        replicas by index."""
+        self._refresh()
+        live = self._live()
+        if not live:
+            raise OutcoreError("UNAVAILABLE", "no replica is up (all failed in the last "
+                                              f"{self.retry_after:g} s)")
+        if self._bounds is None:
+            self._bounds = self._scene_bounds(live)
+            live = self._live()
+        ring = HashRing(live)
+        keys = ray_keys(rays, *self._bounds, cells=self.cells)
+        unique, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        owner = ring.assign({int(k): int(c) for k, c in zip(unique, counts)}, self.load_factor)
+        index = {address: i for i, address in enumerate(ring.replicas)}
+        replica_of_key = np.array([index[owner[int(k)]] for k in unique], dtype=np.int64)
+        return ring, replica_of_key[inverse], ring.replicas
+
+    def _scene_bounds(self, live: list[str]):
+        """The scene's box from the first replica that answers."""
+        for address in live:
+            try:
+                info = self.client(address).scene_info()
+                return info["bounds_lo"], info["bounds_hi"]
+            except OutcoreError as e:
+                if e.code != "UNAVAILABLE":
+                    raise
+                self._mark_down(address)
+        raise OutcoreError("UNAVAILABLE", f"no replica answered GetSceneInfo (tried {', '.join(live)})")
+
+    def query(self, rays: np.ndarray, run_part, out: np.ndarray) -> list:
+        """Answers `rays` into `out` by parts, run_part(client, part_rays)
+        returning (answers, stats) per part; returns the parts' stats."""
+        ring, replica_of_ray, replicas = self.plan(rays)
+        parts = [(replicas[r], np.flatnonzero(replica_of_ray == r)) for r in range(len(replicas))]
+        parts = [(address, idx) for address, idx in parts if idx.size]
+        futures = [(address, idx, self._pool.submit(run_part, self.client(address), rays[idx]))
+                   for address, idx in parts]
+        stats = []
+        for address, idx, future in futures:
+            answers, part_stats = self._finish_part(address, idx, future, rays, run_part)
+            out[idx] = answers
+            stats.append(part_stats)
+        return stats
+
+    def _finish_part(self, address, idx, future, rays, run_part):
+        """A part's answers; on UNAVAILABLE, the same part from the next live
+        replicas on the ring, in turn."""
+        tried = {address}
+        while True:
+            try:
+                return future.result()
+            except OutcoreError as e:
+                if e.code != "UNAVAILABLE":
+                    raise
+                self._mark_down(address)
+                live = [a for a in self._live() if a not in tried]
+                if not live:
+                    raise OutcoreError("UNAVAILABLE", f"every replica failed for a part of {idx.size} rays; "
+                                                      f"last: {e.details}") from None
+                address = next(a for a in HashRing(self.replicas()).walk(address) if a in live)
+                tried.add(address)
+                with self._lock:
+                    self.failovers += 1
+                future = self._pool.submit(run_part, self.client(address), rays[idx])

@@ -1,0 +1,177 @@
+"""Replicas with cache-affinity routing (issue 30), on loopback: three real
+`outcore serve` processes over one store, each with a cache budget at most a
+quarter of the scene's built size; a SceneClient given their addresses
+splits each batch by routing key, sends the parts in parallel and puts the
+answers back in input order, bitwise those of one server; a replica killed
+before or during a batch costs nothing but time; adding a replica moves few
+keys; a "dns:" target is resolved into replicas."""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import outcore
+from outcore import _routing
+from support import Server, run_outcore
+
+BUDGET_MB = 2  # the city below builds to ~10.7 MiB: more than 4x the budget
+
+
+@pytest.fixture(scope="module")
+def city(tmp_path_factory):
+    path = tmp_path_factory.mktemp("replicas") / "city.oc"
+    run_outcore("pack", "gen:city", "-o", path, "--brick-tris", 8192, "-q")
+    return path
+
+
+@pytest.fixture(scope="module")
+def rays():
+    rng = np.random.default_rng(30)
+    n = 120_000
+    origins = rng.standard_normal((n, 3))
+    origins *= 80 / np.linalg.norm(origins, axis=1, keepdims=True)
+    targets = rng.uniform(-40, 40, (n, 3))
+    targets[:, 1] = rng.uniform(-1.5, 1.5, n)
+    return np.ascontiguousarray(np.concatenate([origins, targets - origins], axis=1), dtype=np.float32)
+
+
+def _start(city, count):
+    return [Server(city, "--cache-mb", BUDGET_MB) for _ in range(count)]
+
+
+def _stop(servers):
+    for server in servers:
+        if server.process.poll() is None:
+            assert server.stop() == 0, "".join(server.lines)
+
+
+@pytest.fixture(scope="module")
+def reference(city, rays):
+    [server] = _start(city, 1)
+    try:
+        with outcore.SceneClient(server.address, timeout=120) as client:
+            return client.cast_rays(rays), client.test_occlusions(rays)
+    finally:
+        _stop([server])
+
+
+@pytest.fixture(scope="module")
+def replicas(city):
+    servers = _start(city, 3)
+    yield servers
+    _stop(servers)
+
+
+def _same_hits(a, b):
+    np.testing.assert_array_equal(a["t_hit"].view(np.uint32), b["t_hit"].view(np.uint32))
+    np.testing.assert_array_equal(a["primitive_ids"], b["primitive_ids"])
+    np.testing.assert_array_equal(a["geometry_ids"], b["geometry_ids"])
+
+
+def test_routed_answers_are_one_servers_bitwise_and_spread_within_the_bound(replicas, rays, reference):
+    addresses = [s.address for s in replicas]
+    with outcore.SceneClient(addresses, timeout=120) as client:
+        assert client.replicas() == sorted(addresses)
+        hits = client.cast_rays(rays)
+        assert client.last_replicas == 3
+        assert client.last_stats["rays"] == len(rays)
+        occluded = client.test_occlusions(rays)
+        # The bound: no replica above 1.25x the average, unless one key is larger.
+        ring, replica_of_ray, _ = client._router.plan(rays)
+    _same_hits(hits, reference[0])
+    np.testing.assert_array_equal(occluded, reference[1])
+    loads = np.bincount(replica_of_ray, minlength=3)
+    keys = _routing.ray_keys(rays, *client._router._bounds)
+    largest_key = np.unique(keys, return_counts=True)[1].max()
+    assert loads.max() <= max(np.ceil(1.25 * len(rays) / 3), largest_key), loads
+    assert (loads > 0).all()
+
+
+def test_the_same_key_goes_to_the_same_replica_every_batch(replicas, rays):
+    with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
+        _, first, _ = client._router.plan(rays)
+        _, again, _ = client._router.plan(rays)
+        _, half, _ = client._router.plan(rays[: len(rays) // 2])
+    np.testing.assert_array_equal(first, again)
+    # Another batch of the same region keeps most rays where they were.
+    assert np.mean(half == first[: len(rays) // 2]) > 0.6
+
+
+def test_a_replica_down_before_or_during_a_batch_changes_no_answer(city, rays, reference):
+    servers = _start(city, 3)
+    try:
+        addresses = [s.address for s in servers]
+        servers[0].process.send_signal(signal.SIGKILL)
+        servers[0].process.wait(30)
+        with outcore.SceneClient(addresses, timeout=120) as client:
+            _same_hits(client.cast_rays(rays), reference[0])
+            assert servers[0].address not in client._router._live()
+        # During: kill a second replica while a batch is in flight.
+        with outcore.SceneClient(addresses[1:], timeout=120) as client:
+            client.cast_rays(rays[:1000])  # connected
+            killer = threading.Timer(0.02, lambda: servers[1].process.send_signal(signal.SIGKILL))
+            killer.start()
+            big = np.concatenate([rays] * 4)
+            hits = client.cast_rays(big)
+            killer.join()
+            assert client._router.failovers >= 1  # the killed replica's part was sent again
+            for k in range(4):
+                _same_hits({key: value[k * len(rays):(k + 1) * len(rays)] for key, value in hits.items()},
+                           reference[0])
+            # Only the last replica is left; a batch still completes.
+            _same_hits(client.cast_rays(rays), reference[0])
+    finally:
+        _stop(servers)
+
+
+def test_adding_a_replica_moves_few_keys(replicas, rays):
+    with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
+        client._router.plan(rays[:10])
+        keys = _routing.ray_keys(rays, *client._router._bounds)
+    unique, counts = np.unique(keys, return_counts=True)
+    load = {int(k): int(c) for k, c in zip(unique, counts)}
+    three = _routing.HashRing(["a:1", "b:1", "c:1"]).assign(load)
+    four = _routing.HashRing(["a:1", "b:1", "c:1", "d:1"]).assign(load)
+    moved_rays = sum(load[k] for k in load if three[k] != four[k]) / sum(load.values())
+    # The new replica's fair share is a quarter; bounded load moves a little more.
+    assert 0.1 < moved_rays < 0.5, moved_rays
+
+
+def test_a_dns_target_is_resolved_into_replicas(replicas, rays, reference):
+    port = replicas[0].address.rsplit(":", 1)[1]
+    with outcore.SceneClient(f"dns:///localhost:{port}", timeout=120) as client:
+        assert f"127.0.0.1:{port}" in client.replicas()
+        _same_hits(client.cast_rays(rays), reference[0])
+
+
+def test_replicas_refuse_the_dynamic_layer_and_bad_arguments(replicas):
+    with outcore.SceneClient([s.address for s in replicas], timeout=30) as client:
+        with pytest.raises(outcore.OutcoreError, match="dynamic layer belongs to one server"):
+            client.add_mesh(np.zeros((3, 3), np.float32), np.array([[0, 1, 2]], np.uint32))
+        assert client.scene_info()["triangle_count"] == 128000  # other calls: one replica
+    with pytest.raises(ValueError, match="replicas"):
+        outcore.SceneClient([])
+    with pytest.raises(ValueError, match="route_cells"):
+        outcore.SceneClient([replicas[0].address], route_cells=0)
+    with pytest.raises(outcore.OutcoreError, match="cannot resolve"):
+        outcore.SceneClient("dns:///no-such-host.invalid:50051")
+
+
+def test_ring_walks_and_keys():
+    ring = _routing.HashRing(["a:1", "b:1", "c:1"])
+    for key in range(50):
+        walk = ring.walk(key)
+        assert sorted(walk) == ["a:1", "b:1", "c:1"] and walk == ring.walk(key)
+    # Keys: entry cells of rays into the box; misses negative, by blocks.
+    rays = np.array([[-5, 0.5, 0.5, 1, 0, 0], [0.5, 0.5, 5, 0, 0, -1], [-5, 5, 5, -1, 0, 0],
+                     [0.1, 0.1, 0.1, 1, 1, 1]], np.float32)
+    keys = _routing.ray_keys(rays, [0, 0, 0], [1, 1, 1], cells=4)
+    assert keys[0] == 0 + 4 * (2 + 4 * 2)  # enters at x = 0, y = z = 0.5
+    assert keys[1] == 2 + 4 * (2 + 4 * 3)  # enters at z = 1
+    assert keys[2] < 0  # points away
+    assert keys[3] == 0  # starts inside, in the first cell
