@@ -48,12 +48,14 @@ from trace_bench import SCENES, open3d_cast  # noqa: E402
 
 
 class Server:
-    """`outcore serve STORE` on loopback, 2 threads, 8 GiB cache; `extra`: more
-    flags (with --metrics-listen, `metrics` is its HOST:PORT)."""
+    """`outcore serve STORE` on loopback, 2 threads, 8 GiB cache unless `extra`
+    (more flags) has its own --cache-mb; with --metrics-listen, `metrics` is
+    its HOST:PORT."""
 
     def __init__(self, store, extra=()):
+        cache = [] if "--cache-mb" in extra else ["--cache-mb", "8192"]
         self.proc = subprocess.Popen([OUTCORE, "serve", store, "--listen", "127.0.0.1:0", "--threads", "2",
-                                      "--cache-mb", "8192", "--log-level", "warn", *extra],
+                                      *cache, "--log-level", "warn", *extra],
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.address = self.metrics = None
         ready = threading.Event()

@@ -35,6 +35,7 @@
 #include <string>
 #include <vector>
 
+#include "client/cpp/grpc_targets.h"
 #include "client/cpp/secure_channel.h"
 #include "core/query/query_engine.h"
 #include "core/ray/ray_types.h"
@@ -157,15 +158,6 @@ class SceneClient {
   std::mutex objects_mutex_;
   std::vector<std::unique_ptr<SharedMemoryObject>> spare_objects_;  // at most kSpareObjects
 };
-
-// True for gRPC targets on this host: 127.x.y.z, localhost, [::1], unix:.
-bool is_loopback_target(const std::string& address);
-
-// INVALID_ARGUMENT naming `address` when a HOST:PORT in it (bare, after
-// dns:, or in an ipv4:/ipv6: list) has no port or one that is not 1 to 65535:
-// gRPC's resolver would take the port modulo 65536 and connect elsewhere.
-// Targets of other schemes (unix:, ...) are left to gRPC.
-Status check_target_ports(const std::string& address);
 
 // The engine's figures from the wire's (a reply's, or CallStats::engine).
 // Those the wire does not carry per request stay 0: peak_bytes_resident,
