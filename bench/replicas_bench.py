@@ -94,7 +94,7 @@ def main():
     ap.add_argument("--rays", type=int, default=1_000_000)
     ap.add_argument("--kinds", default="incoherent,camera")
     ap.add_argument("--work", default=os.path.join(ROOT, "build", "bench-replicas"))
-    ap.add_argument("--route-cells", type=int, default=4, help="SceneClient(route_cells=): the key grid's side")
+    ap.add_argument("--route-cells", type=int, default=8, help="SceneClient(route_cells=): the key grid's side")
     ap.add_argument("--configs", help="semicolon-separated configuration names to run (default: all)")
     ap.add_argument("--json")
     a = ap.parse_args()

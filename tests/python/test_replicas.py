@@ -85,7 +85,7 @@ def test_routed_answers_are_one_servers_bitwise_and_spread_within_the_bound(repl
     _same_hits(hits, reference[0])
     np.testing.assert_array_equal(occluded, reference[1])
     loads = np.bincount(replica_of_ray, minlength=3)
-    keys = _routing.ray_keys(rays, *client._router._bounds)
+    keys = _routing.ray_keys(rays, *client._router._bounds, cells=client._router.cells)
     largest_key = np.unique(keys, return_counts=True)[1].max()
     assert loads.max() <= max(np.ceil(1.25 * len(rays) / 3), largest_key), loads
     assert (loads > 0).all()
@@ -131,7 +131,7 @@ def test_a_replica_down_before_or_during_a_batch_changes_no_answer(city, rays, r
 def test_adding_a_replica_moves_few_keys(replicas, rays):
     with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
         client._router.plan(rays[:10])
-        keys = _routing.ray_keys(rays, *client._router._bounds)
+        keys = _routing.ray_keys(rays, *client._router._bounds, cells=client._router.cells)
     unique, counts = np.unique(keys, return_counts=True)
     load = {int(k): int(c) for k, c in zip(unique, counts)}
     three = _routing.HashRing(["a:1", "b:1", "c:1"]).assign(load)
@@ -163,14 +163,17 @@ def test_replicas_refuse_the_dynamic_layer_and_bad_arguments(replicas):
 
 def test_ring_walks_and_keys():
     ring = _routing.HashRing(["a:1", "b:1", "c:1"])
-    for key in range(50):
-        walk = ring.walk(key)
-        assert sorted(walk) == ["a:1", "b:1", "c:1"] and walk == ring.walk(key)
-    # Keys: entry cells of rays into the box; misses negative, by blocks.
-    rays = np.array([[-5, 0.5, 0.5, 1, 0, 0], [0.5, 0.5, 5, 0, 0, -1], [-5, 5, 5, -1, 0, 0],
-                     [0.1, 0.1, 0.1, 1, 1, 1]], np.float32)
-    keys = _routing.ray_keys(rays, [0, 0, 0], [1, 1, 1], cells=4)
-    assert keys[0] == 0 + 4 * (2 + 4 * 2)  # enters at x = 0, y = z = 0.5
-    assert keys[1] == 2 + 4 * (2 + 4 * 3)  # enters at z = 1
-    assert keys[2] < 0  # points away
-    assert keys[3] == 0  # starts inside, in the first cell
+    for position in range(0, 2**64, 2**58):
+        walk = ring.walk(position)
+        assert sorted(walk) == ["a:1", "b:1", "c:1"] and walk == ring.walk(position)
+    # A flat box gets a flat grid.
+    assert list(_routing.grid_dims([0, 0, 0], [100, 3, 50], 8)) == [8, 1, 4]
+    # Keys: ring positions of the entry cell, in Morton order; the same
+    # column entered from above or below is one key; misses are hashed.
+    rays = np.array([[0.3, 5, 0.3, 0, -1, 0], [0.3, -5, 0.3, 0, 1, 0], [0.9, 5, 0.9, 0, -1, 0],
+                     [-5, 5, 5, -1, 0, 0], [0.01, 0.01, 0.01, 1, 0, 0]], np.float32)
+    keys = _routing.ray_keys(rays, [0, 0, 0], [1, 0.1, 1], cells=4)
+    assert keys[0] == keys[1] != keys[2]
+    assert keys[3] not in keys[:3]
+    # Morton order: cell (0, 0, 0) is the first slice of the ring, (3, 0, 3) a later one.
+    assert keys[4] < keys[0] < keys[2]

@@ -3,16 +3,20 @@ whole scene from the same store, so any replica answers any ray the same;
 sending the rays that need the same bricks to the same replica makes the
 replicas' caches add up instead of each holding the whole working set.
 
-- The key of a ray is the cell of a G x G x G grid over the scene's box
-  (SceneInfo bounds) where the ray enters the box (G = 4 by default): rays
-  entering the same region start in the same bricks. Rays that miss the box
-  cost nothing anywhere; they are keyed by blocks of their index so that they
-  spread.
-- Keys go to replicas on a consistent-hash ring (64-bit BLAKE2b, 100 virtual
-  nodes a replica) with bounded load (Mirrokni, Thorup, Zadimoghaddam 2018):
-  a key goes to the first replica clockwise from its hash whose rays stay
-  within load_factor x the average (1.25), so no replica gets far more than
-  its share and a replica joining or leaving moves few keys.
+- The key of a ray is the cell of a grid over the scene's box (SceneInfo
+  bounds) where the ray enters the box: `cells` (8) along the box's longest
+  side, the other sides in proportion (a flat city gets 8 x 1 x 8), so that
+  rays entering one column from above or below share a key. The key is the
+  cell's Morton code scaled onto the 64-bit ring: neighbouring cells are
+  neighbours on the ring. Rays that miss the box cost nothing anywhere; they
+  get hashed positions by blocks of their index, so that they spread.
+- Each replica is a few points (4 virtual nodes) on that ring, so it owns a
+  few arcs of the Morton curve: compact regions of the scene, whose bricks
+  its cache then holds. Keys go to the first replica clockwise whose rays
+  stay within load_factor x the average (1.25; bounded load, Mirrokni,
+  Thorup, Zadimoghaddam 2018): a replica over its share spills to the next
+  arc, a neighbouring region, and a replica joining or leaving moves few
+  keys.
 - The parts go out in parallel and the answers are put back in input order.
   A part whose replica fails (UNAVAILABLE) goes again to the next replicas on
   the ring; the failed replica is left out until it has been down for
@@ -38,7 +42,7 @@ import numpy as np
 
 from .errors import OutcoreError
 
-VIRTUAL_NODES = 100
+VIRTUAL_NODES = 4
 MISS_BLOCK_RAYS = 8192
 
 
@@ -47,7 +51,8 @@ def _hash64(text: str) -> int:
 
 
 class HashRing:
-    """Replicas (address strings) on a ring of virtual nodes."""
+    """Replicas (address strings) on a 64-bit ring of virtual nodes; keys are
+    positions on the ring (ray_keys)."""
 
     def __init__(self, replicas, virtual_nodes: int = VIRTUAL_NODES):
         self.replicas = sorted(set(replicas))
@@ -55,11 +60,11 @@ class HashRing:
         self._hashes = np.array([h for h, _ in points], dtype=np.uint64)
         self._owners = [r for _, r in points]
 
-    def walk(self, key) -> list[str]:
-        """Every replica once, in ring order from the key's hash."""
+    def walk(self, position: int) -> list[str]:
+        """Every replica once, in ring order from `position`."""
         if not self.replicas:
             return []
-        start = int(np.searchsorted(self._hashes, np.uint64(_hash64(f"key:{key}")))) % len(self._owners)
+        start = int(np.searchsorted(self._hashes, np.uint64(position))) % len(self._owners)
         order, seen = [], set()
         for i in range(len(self._owners)):
             owner = self._owners[(start + i) % len(self._owners)]
@@ -71,9 +76,9 @@ class HashRing:
         return order
 
     def assign(self, counts: dict, load_factor: float = 1.25) -> dict:
-        """key -> replica for keys with ray counts: each key to the first
-        replica on its walk whose load stays within load_factor x the
-        average (a key larger than that goes to the least loaded one)."""
+        """key -> replica for keys (ring positions) with ray counts: each key
+        to the first replica on its walk whose load stays within load_factor
+        x the average (a key larger than that goes to the least loaded one)."""
         if not self.replicas:
             return {}
         total = sum(counts.values())
@@ -81,7 +86,7 @@ class HashRing:
         load = dict.fromkeys(self.replicas, 0)
         owner = {}
         # Large keys first, so the small ones fill the gaps they leave.
-        for key in sorted(counts, key=lambda k: (-counts[k], _hash64(f"key:{k}"))):
+        for key in sorted(counts, key=lambda k: (-counts[k], k)):
             walk = self.walk(key)
             chosen = next((r for r in walk if load[r] + counts[key] <= capacity), None)
             if chosen is None:
@@ -91,9 +96,29 @@ class HashRing:
         return owner
 
 
-def ray_keys(rays: np.ndarray, lo, hi, cells: int = 4) -> np.ndarray:
-    """The routing key of each (n, 6|8) ray: the grid cell where it enters the
-    scene's box, or a negative block key for rays that miss the box."""
+def _spread_bits(v: np.ndarray) -> np.ndarray:
+    """Bits of v (< 2**21) moved to every third position (Morton order)."""
+    v = v.astype(np.uint64) & np.uint64(0x1FFFFF)
+    for shift, mask in ((32, 0x1F00000000FFFF), (16, 0x1F0000FF0000FF), (8, 0x100F00F00F00F00F),
+                        (4, 0x10C30C30C30C30C3), (2, 0x1249249249249249)):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v
+
+
+def grid_dims(lo, hi, cells: int) -> np.ndarray:
+    """Cells along each axis: `cells` along the box's longest side, the others
+    in proportion (at least 1), so a flat scene gets a flat grid."""
+    extent = np.maximum(np.asarray(hi, np.float64) - np.asarray(lo, np.float64), 0)
+    longest = extent.max() if extent.max() > 0 else 1.0
+    return np.maximum(1, np.round(cells * extent / longest)).astype(np.int64)
+
+
+def ray_keys(rays: np.ndarray, lo, hi, cells: int = 8) -> np.ndarray:
+    """The routing key of each (n, 6|8) ray, a position on the 64-bit ring:
+    the Morton code of the grid cell where the ray enters the scene's box
+    (grid_dims), scaled to the ring, so that neighbouring cells are
+    neighbours on the ring and a replica's arcs are compact regions; rays
+    that miss the box get hashed positions, by blocks of their index."""
     n = rays.shape[0]
     lo = np.asarray(lo, dtype=np.float64)
     hi = np.asarray(hi, dtype=np.float64)
@@ -107,13 +132,20 @@ def ray_keys(rays: np.ndarray, lo, hi, cells: int = 4) -> np.ndarray:
     t_enter = np.fmax(np.nanmax(np.fmin(t0, t1), axis=1), tnear)
     t_exit = np.fmin(np.nanmin(np.fmax(t0, t1), axis=1), tfar)
     enters = np.isfinite(t_enter) & (t_enter <= t_exit)
+    dims = grid_dims(lo, hi, cells)
     extent = np.where(hi > lo, hi - lo, 1.0)
     point = o + np.where(enters, t_enter, 0.0)[:, None] * d
-    cell = np.clip(np.floor((point - lo) / extent * cells), 0, cells - 1)
+    cell = np.clip(np.floor((point - lo) / extent * dims), 0, dims - 1)
     cell = np.nan_to_num(cell, nan=0.0).astype(np.int64)
-    keys = cell[:, 0] + cells * (cell[:, 1] + cells * cell[:, 2])
-    misses = -1 - np.arange(n, dtype=np.int64) // MISS_BLOCK_RAYS
-    return np.where(enters, keys, misses)
+    code = _spread_bits(cell[:, 0]) | (_spread_bits(cell[:, 1]) << np.uint64(1)) | \
+        (_spread_bits(cell[:, 2]) << np.uint64(2))
+    bits = 3 * max(1, int(np.ceil(np.log2(dims.max()))) if dims.max() > 1 else 1)
+    # Each cell's code at the middle of its slice of the ring.
+    positions = (code << np.uint64(64 - bits)) + (np.uint64(1) << np.uint64(63 - bits))
+    blocks = np.arange(n, dtype=np.int64) // MISS_BLOCK_RAYS
+    miss_positions = np.array([_hash64(f"miss:{b}") for b in range(int(blocks[-1]) + 1 if n else 0)],
+                              dtype=np.uint64)
+    return np.where(enters, positions, miss_positions[blocks] if n else positions)
 
 
 def resolve(target: str) -> list[str]:
@@ -140,7 +172,7 @@ def resolve(target: str) -> list[str]:
 class Router:
     """Routes the ray queries of a replicated SceneClient (see the module)."""
 
-    def __init__(self, targets, make_client, cells: int = 4, load_factor: float = 1.25,
+    def __init__(self, targets, make_client, cells: int = 8, load_factor: float = 1.25,
                  resolve_every: float = 30.0, retry_after: float = 30.0):
         self._targets = list(targets)
         self._make_client = make_client
@@ -231,6 +263,7 @@ class Router:
         ring = HashRing(live)
         keys = ray_keys(rays, *self._bounds, cells=self.cells)
         unique, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
         owner = ring.assign({int(k): int(c) for k, c in zip(unique, counts)}, self.load_factor)
         index = {address: i for i, address in enumerate(ring.replicas)}
         replica_of_key = np.array([index[owner[int(k)]] for k in unique], dtype=np.int64)
@@ -278,7 +311,7 @@ class Router:
                 if not live:
                     raise OutcoreError("UNAVAILABLE", f"every replica failed for a part of {idx.size} rays; "
                                                       f"last: {e.details}") from None
-                address = next(a for a in HashRing(self.replicas()).walk(address) if a in live)
+                address = next(a for a in HashRing(self.replicas()).walk(_hash64(address)) if a in live)
                 tried.add(address)
                 with self._lock:
                     self.failovers += 1

@@ -166,7 +166,7 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
 
     def __init__(self, address, timeout: float | None = None, max_message_mb: float = 64,
                  chunk_rays: int | None = None, shared_memory: bool = True, *, tls_ca=None, tls_cert=None,
-                 tls_key=None, token: str | None = None, route_cells: int = 4, load_factor: float = 1.25):
+                 tls_key=None, token: str | None = None, route_cells: int = 8, load_factor: float = 1.25):
         self._router = None
         if isinstance(address, (list, tuple)) or (isinstance(address, str) and address.startswith("dns:")):
             targets = [address] if isinstance(address, str) else list(address)
