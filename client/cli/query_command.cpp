@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "client/cli/channel_options.h"
+#include "client/cpp/replica_router.h"
 #include "client/cpp/scene_client.h"
 #include "core/cli/commands.h"
 #include "core/io/npy.h"
@@ -52,9 +53,19 @@ int run_query(const QueryArgs& args) {
   auto security = channel_security_of(args.security);
   if (!security.ok()) return report_command_error("query", security.status().message());
   connect_options.security = std::move(*security);
-  auto connection = client::SceneClient::connect(args.server, connect_options);
-  if (!connection.ok()) return report_command_error("query", connection.status().message());
-  client::SceneClient& scene = **connection;
+  // "a:1,b:2,c:3": replicas, each batch routed across them (replica_router.h).
+  const std::vector<std::string> replicas = client::replica_list(args.server);
+  std::unique_ptr<client::SceneClient> single;
+  std::unique_ptr<client::ReplicaRouter> router;
+  if (replicas.empty()) {
+    auto connection = client::SceneClient::connect(args.server, connect_options);
+    if (!connection.ok()) return report_command_error("query", connection.status().message());
+    single = std::move(*connection);
+  } else {
+    auto connection = client::ReplicaRouter::connect(replicas, connect_options);
+    if (!connection.ok()) return report_command_error("query", connection.status().message());
+    router = std::move(*connection);
+  }
 
   client::CallOptions options;
   options.deadline_seconds = args.deadline_seconds;
@@ -81,8 +92,13 @@ int run_query(const QueryArgs& args) {
   for (int r = 0; r < std::max(1, args.repeat) && status.ok(); ++r) {
     stats = client::CallStats{};
     const auto start = std::chrono::steady_clock::now();
-    status = args.any_hit ? scene.occluded(*rays, occluded, options, &stats)
-                          : scene.intersect(*rays, hits, options, &stats);
+    if (router) {
+      status = args.any_hit ? router->occluded(*rays, occluded, options, &stats)
+                            : router->intersect(*rays, hits, options, &stats);
+    } else {
+      status = args.any_hit ? single->occluded(*rays, occluded, options, &stats)
+                            : single->intersect(*rays, hits, options, &stats);
+    }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (args.repeat > 1 && status.ok()) std::printf("call %d/%d seconds %.6f\n", r + 1, args.repeat, seconds);
   }
@@ -96,12 +112,16 @@ int run_query(const QueryArgs& args) {
   if (args.print_stats) {
     // Printed as `outcore trace --stats` does; the cache's peak and budget
     // and the proxies' size are server-wide, so they come from GetStats.
-    auto server = scene.stats(args.deadline_seconds);
-    if (!server.ok()) return report_command_error("query", server.status().message());
+    // With replicas the figures are summed over them, the server-wide ones
+    // left out (each replica has its own: ask each with GetStats).
     QueryStats s = client::to_query_stats(stats.engine);
-    s.peak_bytes_resident = server->peak_resident_bytes();
-    s.cache_budget_bytes = server->cache_budget_bytes();
-    s.proxy_bytes = server->proxy_bytes();
+    if (single) {
+      auto server = single->stats(args.deadline_seconds);
+      if (!server.ok()) return report_command_error("query", server.status().message());
+      s.peak_bytes_resident = server->peak_resident_bytes();
+      s.cache_budget_bytes = server->cache_budget_bytes();
+      s.proxy_bytes = server->proxy_bytes();
+    }
     std::printf("messages %llu\n", static_cast<unsigned long long>(stats.messages));
     std::printf("shared_memory %s\n", stats.shared ? "yes" : "no");
     std::fputs(s.to_text().c_str(), stdout);
@@ -114,7 +134,10 @@ int run_query(const QueryArgs& args) {
 void add_query_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<QueryArgs>();
   CLI::App* cmd = app.add_subcommand("query", "Trace a rays .npy on an `outcore serve` server");
-  cmd->add_option("--server", args->server, "HOST:PORT of the server")->capture_default_str();
+  cmd->add_option("--server", args->server,
+                  "HOST:PORT of the server, or replicas HOST:PORT,HOST:PORT,... (batches routed by ray; "
+                  "docs/SCALING.md)")
+      ->capture_default_str();
   cmd->add_option("--rays", args->rays_path, "Rays .npy: float32 (N,6) or (N,8)")->required();
   cmd->add_option("-o,--output", args->output_path, "Hits .npy to write (bool .npy with --any-hit)")
       ->required();

@@ -177,3 +177,18 @@ def test_ring_walks_and_keys():
     assert keys[3] not in keys[:3]
     # Morton order: cell (0, 0, 0) is the first slice of the ring, (3, 0, 3) a later one.
     assert keys[4] < keys[0] < keys[2]
+
+
+def test_outcore_query_routes_over_a_replica_list(replicas, rays, reference, tmp_path):
+    np.save(tmp_path / "rays.npy", rays)
+    out = tmp_path / "hits.npy"
+    run_outcore("query", "--server", ",".join(s.address for s in replicas), "--rays", tmp_path / "rays.npy",
+                "-o", out, "--stats")
+    hits = np.load(out)
+    np.testing.assert_array_equal(hits["t_hit"].view(np.uint32), reference[0]["t_hit"].view(np.uint32))
+    np.testing.assert_array_equal(hits["primitive_id"], reference[0]["primitive_ids"])
+    # The C++ and Python clients place the same rays on the same replicas.
+    with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
+        _, replica_of_ray, names = client._router.plan(rays)
+    assert names == sorted(s.address for s in replicas)
+    assert np.bincount(replica_of_ray, minlength=3).min() > 0

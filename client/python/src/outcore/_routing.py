@@ -10,7 +10,8 @@ replicas' caches add up instead of each holding the whole working set.
   cell's Morton code scaled onto the 64-bit ring: neighbouring cells are
   neighbours on the ring. Rays that miss the box cost nothing anywhere; they
   get hashed positions by blocks of their index, so that they spread.
-- Each replica is a few points (4 virtual nodes) on that ring, so it owns a
+- Each replica is a few points (4 virtual nodes; FNV-1a + SplitMix64 of
+  `address#i`, as the C++ client) on that ring, so it owns a
   few arcs of the Morton curve: compact regions of the scene, whose bricks
   its cache then holds. Keys go to the first replica clockwise whose rays
   stay within load_factor x the average (1.25; bounded load, Mirrokni,
@@ -31,7 +32,6 @@ is swapped under a lock.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import socket
 import threading
@@ -46,8 +46,19 @@ VIRTUAL_NODES = 4
 MISS_BLOCK_RAYS = 8192
 
 
+_MASK64 = (1 << 64) - 1
+
+
 def _hash64(text: str) -> int:
-    return int.from_bytes(hashlib.blake2b(text.encode(), digest_size=8).digest(), "little")
+    """FNV-1a over the UTF-8 bytes, then the SplitMix64 finaliser: the same
+    64-bit value as the C++ client's ring_hash (client/cpp/replica_ring.cpp),
+    so both clients place replicas and keys alike."""
+    h = 0xCBF29CE484222325
+    for byte in text.encode():
+        h = ((h ^ byte) * 0x100000001B3) & _MASK64
+    h = ((h ^ (h >> 30)) * 0xBF58476D1CE4E5B9) & _MASK64
+    h = ((h ^ (h >> 27)) * 0x94D049BB133111EB) & _MASK64
+    return h ^ (h >> 31)
 
 
 class HashRing:
@@ -110,7 +121,7 @@ def grid_dims(lo, hi, cells: int) -> np.ndarray:
     in proportion (at least 1), so a flat scene gets a flat grid."""
     extent = np.maximum(np.asarray(hi, np.float64) - np.asarray(lo, np.float64), 0)
     longest = extent.max() if extent.max() > 0 else 1.0
-    return np.maximum(1, np.round(cells * extent / longest)).astype(np.int64)
+    return np.maximum(1, np.floor(cells * extent / longest + 0.5)).astype(np.int64)
 
 
 def ray_keys(rays: np.ndarray, lo, hi, cells: int = 8) -> np.ndarray:
@@ -139,7 +150,8 @@ def ray_keys(rays: np.ndarray, lo, hi, cells: int = 8) -> np.ndarray:
     cell = np.nan_to_num(cell, nan=0.0).astype(np.int64)
     code = _spread_bits(cell[:, 0]) | (_spread_bits(cell[:, 1]) << np.uint64(1)) | \
         (_spread_bits(cell[:, 2]) << np.uint64(2))
-    bits = 3 * max(1, int(np.ceil(np.log2(dims.max()))) if dims.max() > 1 else 1)
+    most = int(dims.max())
+    bits = 3 * (max(1, int(np.ceil(np.log2(most)))) if most > 1 else 1)
     # Each cell's code at the middle of its slice of the ring.
     positions = (code << np.uint64(64 - bits)) + (np.uint64(1) << np.uint64(63 - bits))
     blocks = np.arange(n, dtype=np.int64) // MISS_BLOCK_RAYS

@@ -1,0 +1,141 @@
+// The C++ client's cache-affinity routing (client/cpp/replica_ring.h,
+// replica_router.h): the hash, keys, walks and assignment equal the Python
+// client's (outcore/_routing.py) on fixed vectors, so both send the same rays
+// to the same replicas; and three real `outcore serve` replicas under a small
+// budget answer a routed batch bitwise like one server, also when one of
+// them is killed before the batch.
+#include <gtest/gtest.h>
+#include <signal.h>
+
+#include <algorithm>
+#include <cstring>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "client/cpp/replica_ring.h"
+#include "client/cpp/replica_router.h"
+#include "tests/support/packed_scene.h"
+#include "tests/support/server_process.h"
+#include "tests/support/test_rays.h"
+
+namespace outcore::client {
+namespace {
+
+std::vector<Ray> vector_rays() {
+  const float rows[6][6] = {{0.3f, 5, 0.3f, 0, -1, 0},      {0.3f, -5, 0.3f, 0, 1, 0},
+                            {0.9f, 5, 0.9f, 0, -1, 0},      {-5, 5, 5, -1, 0, 0},
+                            {0.01f, 0.01f, 0.01f, 1, 0, 0}, {0.5f, 0.05f, -3, 0.1f, 0, 1}};
+  std::vector<Ray> rays;
+  for (const auto& r : rows) rays.push_back(Ray{{r[0], r[1], r[2]}, {r[3], r[4], r[5]}});
+  return rays;
+}
+
+TEST(ReplicaRing, HashKeysWalksAndAssignmentMatchThePythonClient) {
+  // Values printed by outcore._routing for the same inputs.
+  EXPECT_EQ(ring_hash("a:1#0"), 0xdd7a34b63194174dull);
+  EXPECT_EQ(ring_hash("127.0.0.1:50051#3"), 0x33629d84c96846faull);
+  EXPECT_EQ(ring_hash("miss:0"), 0xc08716614b83a1c4ull);
+  EXPECT_EQ(ring_hash(""), 0xf52a15e9a9b5e89bull);
+  const std::vector<uint64_t> keys = route_keys(vector_rays(), {0, 0, 0}, {1, 0.1f, 1}, 8);
+  const std::vector<uint64_t> expected = {0x1440000000000000ull, 0x1440000000000000ull,
+                                          0xb6c0000000000000ull, 0xc08716614b83a1c4ull,
+                                          0x40000000000000ull,   0x2440000000000000ull};
+  EXPECT_EQ(keys, expected);
+  const ReplicaRing ring({"c:3", "a:1", "b:2"});
+  ASSERT_EQ(ring.replicas(), (std::vector<std::string>{"a:1", "b:2", "c:3"}));
+  const std::vector<std::vector<uint32_t>> walks = {{2, 0, 1}, {2, 0, 1}, {0, 2, 1},
+                                                    {0, 2, 1}, {2, 0, 1}, {1, 2, 0}};
+  for (std::size_t i = 0; i < keys.size(); ++i) EXPECT_EQ(ring.walk(keys[i]), walks[i]) << i;
+  const std::map<uint64_t, uint64_t> counts = {
+      {keys[0], 2}, {keys[2], 3}, {keys[3], 4}, {keys[4], 5}, {keys[5], 6}};
+  const std::map<uint64_t, uint32_t> owner = ring.assign(counts);
+  EXPECT_EQ(owner.at(keys[5]), 1u);
+  EXPECT_EQ(owner.at(keys[4]), 2u);
+  EXPECT_EQ(owner.at(keys[3]), 0u);
+  EXPECT_EQ(owner.at(keys[2]), 0u);
+  EXPECT_EQ(owner.at(keys[0]), 2u);
+}
+
+TEST(ReplicaRing, ReplicaListsAreCommaListsWithoutAScheme) {
+  EXPECT_EQ(replica_list("a:1,b:2"), (std::vector<std::string>{"a:1", "b:2"}));
+  EXPECT_TRUE(replica_list("127.0.0.1:50051").empty());
+  EXPECT_TRUE(replica_list("ipv4:127.0.0.1:1,127.0.0.1:2").empty());  // one gRPC target
+}
+
+class ReplicaRouterTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    scene_ = testing::pack_test_scene({"gen:city?copies=100"}, 8192).release();
+    rays_ = testing::make_test_rays(scene_->bounds, 60000, 30);
+  }
+  static void TearDownTestSuite() {
+    delete scene_;
+    scene_ = nullptr;
+  }
+  static std::vector<std::unique_ptr<testing::ServerProcess>> start(int count) {
+    std::vector<std::unique_ptr<testing::ServerProcess>> servers;
+    for (int i = 0; i < count; ++i) {
+      std::string error;
+      servers.push_back(testing::ServerProcess::start(scene_->path, {"--cache-mb", "2"}, error));
+      EXPECT_NE(servers.back(), nullptr) << error;
+    }
+    return servers;
+  }
+  static testing::PackedScene* scene_;
+  static std::vector<Ray> rays_;
+};
+testing::PackedScene* ReplicaRouterTest::scene_ = nullptr;
+std::vector<Ray> ReplicaRouterTest::rays_;
+
+void expect_same_hits(const std::vector<Hit>& a, const std::vector<Hit>& b) {
+  ASSERT_EQ(a.size(), b.size());
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ASSERT_EQ(std::memcmp(&a[i], &b[i], sizeof(Hit)), 0) << "ray " << i;
+  }
+}
+
+TEST_F(ReplicaRouterTest, RoutedAnswersAreOneServersBitwiseAndAKilledReplicaCostsOnlyTime) {
+  auto servers = start(3);
+  ASSERT_EQ(servers.size(), 3u);
+  for (const auto& s : servers) ASSERT_NE(s, nullptr);
+  std::vector<Hit> reference(rays_.size());
+  {
+    auto one = SceneClient::connect(servers[0]->address());
+    ASSERT_TRUE(one.ok()) << one.status().message();
+    ASSERT_TRUE((*one)->intersect(rays_, reference).ok());
+  }
+  std::vector<std::string> addresses;
+  for (const auto& s : servers) addresses.push_back(s->address());
+  auto router = ReplicaRouter::connect(addresses);
+  ASSERT_TRUE(router.ok()) << router.status().message();
+  std::vector<Hit> hits(rays_.size());
+  CallStats stats;
+  ASSERT_TRUE((*router)->intersect(rays_, hits, {}, &stats).ok());
+  expect_same_hits(hits, reference);
+  EXPECT_EQ(stats.engine.rays(), rays_.size());
+  const std::vector<uint64_t> loads = (*router)->plan_loads(rays_);
+  for (const uint64_t load : loads) EXPECT_GT(load, 0u);
+  std::vector<uint8_t> occluded(rays_.size()), occluded_reference(rays_.size());
+  ASSERT_TRUE((*router)->occluded(rays_, occluded).ok());
+  for (std::size_t i = 0; i < rays_.size(); ++i) occluded_reference[i] = reference[i].is_hit() ? 1 : 0;
+  EXPECT_EQ(occluded, occluded_reference);
+
+  // One replica dies: its part goes to the next on the ring.
+  servers[1]->signal(SIGKILL);
+  EXPECT_EQ(servers[1]->stop(SIGKILL), -1);
+  std::fill(hits.begin(), hits.end(), Hit{});
+  ASSERT_TRUE((*router)->intersect(rays_, hits).ok());
+  expect_same_hits(hits, reference);
+  EXPECT_GE((*router)->failovers(), 1u);
+  // Later batches leave it out.
+  const std::vector<std::string> names = (*router)->replicas();
+  const auto dead =
+      static_cast<std::size_t>(std::find(names.begin(), names.end(), servers[1]->address()) - names.begin());
+  ASSERT_LT(dead, names.size());
+  EXPECT_EQ((*router)->plan_loads(rays_)[dead], 0u);
+}
+
+}  // namespace
+}  // namespace outcore::client
