@@ -40,6 +40,10 @@ struct RenderArgs {
   int threads = 0;
   double deadline_seconds = 0;
   bool no_shared_memory = false;
+  std::string tls_ca;
+  std::string tls_cert;
+  std::string tls_key;
+  std::string auth_token_file;
 };
 
 // The options that belong to one of the two ways to trace: given with the
@@ -137,7 +141,11 @@ int run_render(const RenderArgs& args, const OptionGroups& groups, const Connect
                                   ? open_engine(args)
                                   : connect(RemoteRenderOptions{.server = args.server,
                                                                 .deadline_seconds = args.deadline_seconds,
-                                                                .shared_memory = !args.no_shared_memory});
+                                                                .shared_memory = !args.no_shared_memory,
+                                                                .tls_ca = args.tls_ca,
+                                                                .tls_cert = args.tls_cert,
+                                                                .tls_key = args.tls_key,
+                                                                .auth_token_file = args.auth_token_file});
   if (!trace.ok()) return report_command_error("render", trace.status().message());
 
   RenderReport report;
@@ -202,6 +210,13 @@ void add_render_command(CLI::App& app, int& exit_code, ConnectRenderServer conne
                             "Deadline of each call (a band of up to 4 Mi rays), seconds (0: none)");
   groups.server->add_flag("--no-shared-memory", args->no_shared_memory,
                           "Send rays and get hits over gRPC even when the server is on this host");
+  groups.server->add_option("--tls-ca", args->tls_ca,
+                            "Connect with TLS, trusting this CA's certificate (PEM)");
+  groups.server->add_option("--tls-cert", args->tls_cert,
+                            "Client certificate for servers that require one (PEM)");
+  groups.server->add_option("--tls-key", args->tls_key, "The client certificate's private key (PEM)");
+  groups.server->add_option("--auth-token-file", args->auth_token_file,
+                            "Send this file's token on every call (authorization: Bearer TOKEN)");
   cmd->callback([args, groups, connect = std::move(connect), &exit_code] {
     exit_code = run_render(*args, groups, connect);
   });

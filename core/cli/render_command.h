@@ -26,6 +26,11 @@ struct RemoteRenderOptions {
   std::string server;           // HOST:PORT
   double deadline_seconds = 0;  // of each band's call; 0: none
   bool shared_memory = true;    // large batches through /dev/shm on this host
+  // TLS and the bearer token (as `outcore query`'s flags; empty: none).
+  std::string tls_ca;
+  std::string tls_cert;
+  std::string tls_key;
+  std::string auth_token_file;
 };
 
 // Connects to the server and returns the closest-hit call of its scene.

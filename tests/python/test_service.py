@@ -294,3 +294,24 @@ def test_bad_tls_files_are_named(store, pki, tmp_path):
         outcore.SceneClient("127.0.0.1:1", tls_ca=not_pem)
     with pytest.raises(ValueError, match="tls_ca"):
         outcore.SceneClient("127.0.0.1:1", tls_cert=pki / "client.pem", tls_key=pki / "client.key")
+
+
+def test_render_from_a_server_with_the_token_and_tls(store, pki, token_file, tmp_path, bounds):
+    server = Server(store, "--tls-cert", pki / "server.pem", "--tls-key", pki / "server.key",
+                    "--auth-token-file", token_file)
+    try:
+        lo, hi = bounds
+        center = (lo + hi) / 2
+        eye = center + np.array([0, 0, 3 * float(np.linalg.norm(hi - lo))])
+        render = [str(binary()), "render", "--server", server.address, "--eye", ",".join(map(str, eye)),
+                  "--center", ",".join(map(str, center)), "--up", "0,1,0", "--fov", "40", "--size", "32x24",
+                  "-q", "--tls-ca", str(pki / "ca.pem")]
+        refused = subprocess.run(render + ["-o", str(tmp_path / "refused.png")], capture_output=True, text=True,
+                                 timeout=120)
+        assert refused.returncode != 0 and "UNAUTHENTICATED" in refused.stderr
+        drawn = subprocess.run(render + ["-o", str(tmp_path / "drawn.png"), "--auth-token-file", str(token_file)],
+                               capture_output=True, text=True, timeout=120)
+        assert drawn.returncode == 0, drawn.stderr
+        assert (tmp_path / "drawn.png").read_bytes().startswith(b"\x89PNG")
+    finally:
+        assert server.stop() == 0, "".join(server.lines)
