@@ -59,9 +59,13 @@ TEST(ReplicaRing, HashKeysWalksAndAssignmentMatchThePythonClient) {
 }
 
 TEST(ReplicaRing, ReplicaListsAreCommaListsWithoutAScheme) {
-  EXPECT_EQ(replica_list("a:1,b:2"), (std::vector<std::string>{"a:1", "b:2"}));
-  EXPECT_TRUE(replica_list("127.0.0.1:50051").empty());
-  EXPECT_TRUE(replica_list("ipv4:127.0.0.1:1,127.0.0.1:2").empty());  // one gRPC target
+  EXPECT_EQ(*replica_list("a:1,b:2"), (std::vector<std::string>{"a:1", "b:2"}));
+  EXPECT_TRUE(replica_list("127.0.0.1:50051")->empty());
+  EXPECT_TRUE(replica_list("ipv4:127.0.0.1:1,127.0.0.1:2")->empty());  // one gRPC target
+  EXPECT_TRUE(replica_list("dns:///127.0.0.1:50051")->empty());        // resolves to one server
+  const auto unknown = replica_list("dns:///no-such-host.invalid:50051");
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.status().message().find("no-such-host.invalid"), std::string::npos);
 }
 
 class ReplicaRouterTest : public ::testing::Test {

@@ -54,7 +54,9 @@ int run_query(const QueryArgs& args) {
   if (!security.ok()) return report_command_error("query", security.status().message());
   connect_options.security = std::move(*security);
   // "a:1,b:2,c:3": replicas, each batch routed across them (replica_router.h).
-  const std::vector<std::string> replicas = client::replica_list(args.server);
+  const auto replicas_or = client::replica_list(args.server);
+  if (!replicas_or.ok()) return report_command_error("query", replicas_or.status().message());
+  const std::vector<std::string>& replicas = *replicas_or;
   std::unique_ptr<client::SceneClient> single;
   std::unique_ptr<client::ReplicaRouter> router;
   if (replicas.empty()) {

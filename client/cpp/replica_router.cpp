@@ -1,5 +1,10 @@
 #include "client/cpp/replica_router.h"
 
+#include <arpa/inet.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+
 #include <algorithm>
 #include <future>
 #include <map>
@@ -30,9 +35,49 @@ Status call(SceneClient& client, std::span<const Ray> rays, std::span<uint8_t> o
 
 }  // namespace
 
-std::vector<std::string> replica_list(const std::string& server) {
+namespace {
+
+// The addresses NAME resolves to, as HOST:PORT (IPv6 in brackets).
+Expected<std::vector<std::string>> resolve_dns(const std::string& target) {
+  std::string name = target.substr(4);  // after "dns:"
+  while (name.starts_with("/")) name.erase(0, 1);
+  const std::size_t colon = name.rfind(':');
+  if (colon == std::string::npos) return invalid_argument("server address '" + target + "' has no port");
+  std::string host = name.substr(0, colon);
+  const std::string port = name.substr(colon + 1);
+  if (host.starts_with("[") && host.ends_with("]")) host = host.substr(1, host.size() - 2);
+  addrinfo hints{};
+  hints.ai_socktype = SOCK_STREAM;
+  addrinfo* found = nullptr;
+  if (const int error = getaddrinfo(host.c_str(), port.c_str(), &hints, &found); error != 0) {
+    return io_error("cannot resolve " + target + ": " + gai_strerror(error));
+  }
+  std::set<std::string> addresses;
+  for (const addrinfo* a = found; a != nullptr; a = a->ai_next) {
+    char ip[INET6_ADDRSTRLEN] = {};
+    const void* where =
+        a->ai_family == AF_INET6
+            ? static_cast<const void*>(&reinterpret_cast<const sockaddr_in6*>(a->ai_addr)->sin6_addr)
+            : static_cast<const void*>(&reinterpret_cast<const sockaddr_in*>(a->ai_addr)->sin_addr);
+    if (inet_ntop(a->ai_family, where, ip, sizeof ip) == nullptr) continue;
+    addresses.insert(a->ai_family == AF_INET6 ? "[" + std::string(ip) + "]:" + port
+                                              : std::string(ip) + ":" + port);
+  }
+  freeaddrinfo(found);
+  if (addresses.empty()) return io_error(target + " resolves to no address");
+  return std::vector<std::string>(addresses.begin(), addresses.end());
+}
+
+}  // namespace
+
+Expected<std::vector<std::string>> replica_list(const std::string& server) {
+  if (server.starts_with("dns:")) {
+    OUTCORE_ASSIGN_OR_RETURN(std::vector<std::string> resolved, resolve_dns(server));
+    if (resolved.size() == 1) return std::vector<std::string>{};  // one server: gRPC's own channel
+    return resolved;
+  }
   if (server.find(',') == std::string::npos || server.starts_with("ipv4:") || server.starts_with("ipv6:")) {
-    return {};
+    return std::vector<std::string>{};
   }
   std::vector<std::string> list;
   std::size_t at = 0;
@@ -47,14 +92,24 @@ std::vector<std::string> replica_list(const std::string& server) {
 Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect(const std::vector<std::string>& addresses,
                                                                 const ConnectOptions& options) {
   std::unique_ptr<ReplicaRouter> router(new ReplicaRouter());
-  router->replicas_ = ReplicaRing(addresses).replicas();
-  if (router->replicas_.empty()) return invalid_argument("no replica given");
-  for (const std::string& address : router->replicas_) {
+  const std::vector<std::string> given = ReplicaRing(addresses).replicas();
+  if (given.empty()) return invalid_argument("no replica given");
+  Status first_error;
+  for (const std::string& address : given) {
     if (address.empty()) return invalid_argument("an empty replica address in the list");
     auto client = SceneClient::connect(address, options);
-    if (!client.ok()) return client.status().with_context("replica " + address);
+    if (!client.ok()) {
+      // Unreachable now: left out of the ring (a dns: name may list a pod
+      // that is gone, or an address family the server does not listen on).
+      if (client.status().code() != StatusCode::kIoError)
+        return client.status().with_context("replica " + address);
+      if (first_error.ok()) first_error = client.status().with_context("replica " + address);
+      continue;
+    }
+    router->replicas_.push_back(address);
     router->clients_.push_back(std::move(*client));
   }
+  if (router->clients_.empty()) return first_error;
   const v1::SceneInfo& info = router->clients_.front()->connected_scene();
   if (info.bounds_lo_size() == 3 && info.bounds_hi_size() == 3) {
     router->lo_ = {info.bounds_lo(0), info.bounds_lo(1), info.bounds_lo(2)};

@@ -22,8 +22,9 @@ namespace outcore::client {
 
 class ReplicaRouter {
  public:
-  // Connects to every replica (one failing is an error: a router starts
-  // with all of them up).
+  // Connects to the replicas; those that cannot be reached (UNAVAILABLE)
+  // are left out, other errors (TLS files, a bad address) are returned, as
+  // is the first error when none can be reached.
   static Expected<std::unique_ptr<ReplicaRouter>> connect(const std::vector<std::string>& addresses,
                                                           const ConnectOptions& options = {});
 
@@ -54,7 +55,10 @@ class ReplicaRouter {
 };
 
 // The replica list of a --server value "a:1,b:2,c:3" (no scheme prefix;
-// "ipv4:..." lists are one gRPC target); empty when it names one server.
-std::vector<std::string> replica_list(const std::string& server);
+// "ipv4:..." lists are one gRPC target), or the addresses a "dns:///NAME:PORT"
+// target resolves to now (getaddrinfo; a headless Service's pods); empty
+// when it names one server. IO_ERROR naming a dns: target that resolves to
+// nothing.
+Expected<std::vector<std::string>> replica_list(const std::string& server);
 
 }  // namespace outcore::client

@@ -192,3 +192,12 @@ def test_outcore_query_routes_over_a_replica_list(replicas, rays, reference, tmp
         _, replica_of_ray, names = client._router.plan(rays)
     assert names == sorted(s.address for s in replicas)
     assert np.bincount(replica_of_ray, minlength=3).min() > 0
+
+
+def test_outcore_query_resolves_a_dns_target_into_replicas(replicas, rays, reference, tmp_path):
+    np.save(tmp_path / "rays.npy", rays)
+    out = tmp_path / "hits.npy"
+    port = replicas[0].address.rsplit(":", 1)[1]
+    # localhost may also resolve to ::1, where nothing listens: left out.
+    run_outcore("query", "--server", f"dns:///localhost:{port}", "--rays", tmp_path / "rays.npy", "-o", out)
+    np.testing.assert_array_equal(np.load(out)["t_hit"].view(np.uint32), reference[0]["t_hit"].view(np.uint32))
