@@ -256,8 +256,7 @@ Expected<std::unique_ptr<server::MetricsHttpServer>> start_metrics(
   OUTCORE_ASSIGN_OR_RETURN(
       auto metrics, server::MetricsHttpServer::start(args.metrics_listen, collect, identity, throughput));
   std::printf("metrics on http://%s\n", metrics->address().c_str());
-  const std::string_view metrics_host = host_of(args.metrics_listen);
-  if (metrics_host != "localhost" && !is_loopback_ip(metrics_host)) {
+  if (!is_loopback_host(host_of(args.metrics_listen))) {
     spdlog::warn(
         "--metrics-listen {} is not a loopback address: /metrics and the status page have no TLS or "
         "token; keep that port on a network only the scraper reaches",

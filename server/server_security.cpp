@@ -41,8 +41,7 @@ Expected<std::shared_ptr<grpc::ServerCredentials>> server_credentials(const TlsF
 Status check_listen_exposure(const std::string& listen, bool tls, bool insecure) {
   if (tls || insecure) return Status::Ok();
   if (listen.starts_with("unix:") || listen.starts_with("unix-abstract:")) return Status::Ok();
-  const std::string_view host = host_of(listen);
-  if (host == "localhost" || is_loopback_ip(host)) return Status::Ok();
+  if (is_loopback_host(host_of(listen))) return Status::Ok();
   return invalid_argument(
       "--listen " + listen +
       " is not a loopback address: serving it in plaintext would let anyone on the network "

@@ -160,8 +160,8 @@ TEST(JsonLogFormatter, OneEscapedObjectPerLine) {
 }
 
 TEST(ListenExposure, PlaintextOnlyOnLoopbackUnlessAskedFor) {
-  for (const char* loopback :
-       {"127.0.0.1:50051", "127.3.4.5:0", "[::1]:50051", "localhost:50051", "unix:/tmp/outcore.sock"}) {
+  for (const char* loopback : {"127.0.0.1:50051", "127.3.4.5:0", "[::1]:50051", "localhost:50051",
+                               "LocalHost.:50051", "unix:/tmp/outcore.sock"}) {
     EXPECT_TRUE(check_listen_exposure(loopback, false, false).ok()) << loopback;
   }
   for (const char* exposed : {"0.0.0.0:50051", "[::]:50051", "10.1.2.3:50051", "myhost:50051"}) {

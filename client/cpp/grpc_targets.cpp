@@ -1,25 +1,10 @@
 #include "client/cpp/grpc_targets.h"
 
-#include <algorithm>
-#include <cctype>
 #include <string_view>
 
 #include "core/util/loopback_address.h"
 
 namespace outcore::client {
-
-namespace {
-
-// A numeric loopback address, or the name localhost (any case, with or
-// without the root's trailing dot).
-bool is_loopback_host(std::string_view host) {
-  std::string lower(host);
-  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
-  if (lower.ends_with(".")) lower.pop_back();
-  return lower == "localhost" || is_loopback_ip(lower);
-}
-
-}  // namespace
 
 bool is_loopback_target(const std::string& address) {
   std::string_view target = address;

@@ -27,12 +27,13 @@
 
 namespace outcore::client {
 
-struct RawQueryRequest {
+// A serialized message as gRPC's slices, either way: a request encoded by
+// encode_query_request, a reply as gRPC received it.
+struct RawQueryMessage {
   grpc::ByteBuffer buffer;
 };
-struct RawQueryReply {
-  grpc::ByteBuffer buffer;
-};
+using RawQueryRequest = RawQueryMessage;
+using RawQueryReply = RawQueryMessage;
 
 struct QueryRequestFields {
   bool strict = false;
@@ -65,30 +66,15 @@ Status decode_query_reply(const RawQueryReply& reply, std::span<uint8_t> answers
 namespace grpc {
 
 template <>
-class SerializationTraits<outcore::client::RawQueryRequest, void> {
+class SerializationTraits<outcore::client::RawQueryMessage, void> {
  public:
-  static Status Serialize(const outcore::client::RawQueryRequest& message, ByteBuffer* buffer,
+  static Status Serialize(const outcore::client::RawQueryMessage& message, ByteBuffer* buffer,
                           bool* own_buffer) {
     *buffer = message.buffer;  // the slices are shared, not copied
     *own_buffer = true;
     return Status::OK;
   }
-  static Status Deserialize(ByteBuffer* buffer, outcore::client::RawQueryRequest* message) {
-    message->buffer.Swap(buffer);
-    return Status::OK;
-  }
-};
-
-template <>
-class SerializationTraits<outcore::client::RawQueryReply, void> {
- public:
-  static Status Serialize(const outcore::client::RawQueryReply& message, ByteBuffer* buffer,
-                          bool* own_buffer) {
-    *buffer = message.buffer;
-    *own_buffer = true;
-    return Status::OK;
-  }
-  static Status Deserialize(ByteBuffer* buffer, outcore::client::RawQueryReply* message) {
+  static Status Deserialize(ByteBuffer* buffer, outcore::client::RawQueryMessage* message) {
     message->buffer.Swap(buffer);
     buffer->Clear();
     return Status::OK;

@@ -10,6 +10,7 @@
 #include <map>
 
 #include "client/cpp/replica_ring.h"
+#include "core/util/loopback_address.h"
 #include "proto/outcore/v1/query_stats_wire.h"
 
 namespace outcore::client {
@@ -39,13 +40,12 @@ namespace {
 
 // The addresses NAME resolves to, as HOST:PORT (IPv6 in brackets).
 Expected<std::vector<std::string>> resolve_dns(const std::string& target) {
-  std::string name = target.substr(4);  // after "dns:"
-  while (name.starts_with("/")) name.erase(0, 1);
-  const std::size_t colon = name.rfind(':');
-  if (colon == std::string::npos) return invalid_argument("server address '" + target + "' has no port");
-  std::string host = name.substr(0, colon);
-  const std::string port = name.substr(colon + 1);
-  if (host.starts_with("[") && host.ends_with("]")) host = host.substr(1, host.size() - 2);
+  std::string_view name = std::string_view(target).substr(4);  // after "dns:"
+  while (name.starts_with("/")) name.remove_prefix(1);
+  const Expected<uint16_t> port_number = port_of(name, 1);
+  if (!port_number.ok()) return invalid_argument("server address " + port_number.status().message());
+  const std::string host(host_of(name));
+  const std::string port = std::to_string(*port_number);
   addrinfo hints{};
   hints.ai_socktype = SOCK_STREAM;
   addrinfo* found = nullptr;

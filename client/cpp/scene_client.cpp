@@ -108,15 +108,16 @@ void fill_request(std::span<const Ray> rays, uint64_t sequence, const CallOption
   request.set_sequence(sequence);
 }
 
-// Bytes of one ray's answer in a reply on the bytes path.
+// The hit fields a request asks for (closest hits only), and the bytes of
+// one ray's answer in its reply on the bytes path (0: not a HitFields value).
 v1::HitFields hit_fields_of(const v1::IntersectResponse*, const CallOptions& options) {
   return options.hit_fields;
 }
 v1::HitFields hit_fields_of(const v1::OccludedResponse*, const CallOptions&) {
   return v1::HIT_FIELDS_ALL;
 }
-uint32_t wire_bytes_per_ray(const v1::IntersectResponse*, const CallOptions& options) {
-  return wire::hit_record_bytes(options.hit_fields);
+uint32_t wire_bytes_per_ray(const v1::IntersectResponse* kind, const CallOptions& options) {
+  return wire::hit_record_bytes(hit_fields_of(kind, options));
 }
 uint32_t wire_bytes_per_ray(const v1::OccludedResponse*, const CallOptions&) {
   return 1;
@@ -451,6 +452,12 @@ Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint3
                         const CallOptions& options, CallStats* stats) {
   const uint64_t n = rays.size();
   if (n == 0) return Status::Ok();
+  // Checked before either path: the shared one answers whole records anyway.
+  const uint32_t wire_bytes = wire_bytes_per_ray(static_cast<const Response*>(nullptr), options);
+  if (wire_bytes == 0) {
+    return invalid_argument("CallOptions::hit_fields " + std::to_string(options.hit_fields) +
+                            " is not a HitFields value");
+  }
   if (options.chunk_rays == 0 && n >= kSharedMinRays && use_shared_.load(std::memory_order_relaxed)) {
     bool send_bytes = false;
     const Status shared = run_shared<Response>(rays, out, out_bytes_per_ray, options, stats, &send_bytes);
@@ -465,11 +472,6 @@ Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint3
   uint64_t chunk = options.chunk_rays ? std::min(options.chunk_rays, max_chunk_rays_) : max_chunk_rays_;
   if (options.chunk_rays == 0 && n > kStreamAboveRays) chunk = std::min(chunk, kStreamChunkRays);
   const std::string method = method_name(static_cast<const Response*>(nullptr));
-  const uint32_t wire_bytes = wire_bytes_per_ray(static_cast<const Response*>(nullptr), options);
-  if (wire_bytes == 0) {
-    return invalid_argument("CallOptions::hit_fields " + std::to_string(options.hit_fields) +
-                            " is not a HitFields value");
-  }
   grpc::ClientContext context;
   set_deadline(context, options.deadline_seconds);
 

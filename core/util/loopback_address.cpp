@@ -3,6 +3,7 @@
 #include <arpa/inet.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cstring>
 #include <string>
 
@@ -55,6 +56,13 @@ Expected<uint16_t> port_of(std::string_view host_port, uint16_t min_port) {
     return invalid_argument(quoted + ": the port " + std::string(port) + " is outside " + range);
   }
   return static_cast<uint16_t>(value);
+}
+
+bool is_loopback_host(std::string_view host) {
+  std::string lower(host);
+  std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
+  if (lower.ends_with(".")) lower.pop_back();
+  return lower == "localhost" || is_loopback_ip(lower);
 }
 
 }  // namespace outcore

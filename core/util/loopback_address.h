@@ -22,6 +22,10 @@ std::string_view host_of(std::string_view host_port);
 // addresses and anything unparsable are false.
 bool is_loopback_ip(std::string_view numeric_host);
 
+// is_loopback_ip, or the name localhost (any case, with or without the
+// root's trailing dot): a host that names this machine.
+bool is_loopback_host(std::string_view host);
+
 // The port of "host:port" or "[v6]:port". INVALID_ARGUMENT naming
 // `host_port` when the host is empty or the port is missing, not a decimal
 // number or outside [min_port, 65535]: the resolver would otherwise take a
