@@ -36,6 +36,7 @@ std::string ProgressBar::detail() const {
 }
 
 ProgressTicker::ProgressTicker(ProgressBar& bar) : bar_(bar) {
+  if (!bar.enabled()) return;  // nothing to redraw: no thread
   thread_ = std::thread([this] {
     std::unique_lock lock(mutex_);
     while (!stop_.wait_for(lock, std::chrono::milliseconds(100), [this] { return stopping_; })) {
@@ -52,7 +53,7 @@ ProgressTicker::~ProgressTicker() {
     stopping_ = true;
   }
   stop_.notify_all();
-  thread_.join();
+  if (thread_.joinable()) thread_.join();
 }
 
 void ProgressBar::advance(uint64_t amount) {
@@ -78,10 +79,11 @@ void ProgressBar::draw(bool final_line) {
   const double fraction = total_ > 0 ? std::min(1.0, static_cast<double>(done) / total_) : 0.0;
   // Work shorter than show_after stays silent, its final line included.
   if (now - start_ < style_.show_after && !drawn_) return;
-  const std::string extra = detail();
   if (is_tty_) {
     if (!final_line && now - last_draw_ < std::chrono::milliseconds(100)) return;
     last_draw_ = now;
+    // The detail (a lock taken by the caller's figures) only for a line drawn.
+    const std::string extra = detail();
     char bar[31];
     const int filled = static_cast<int>(fraction * 30);
     for (int i = 0; i < 30; ++i) bar[i] = i < filled ? '=' : (i == filled ? '>' : ' ');
@@ -113,6 +115,7 @@ void ProgressBar::draw(bool final_line) {
   if (!final_line && decile <= last_decile_ && !quiet_for_long) return;
   last_decile_ = std::max(decile, last_decile_);
   last_draw_ = now;
+  const std::string extra = detail();
   if (total_ > 0) {
     std::fprintf(out_, "%s: %3.0f%% %s/%s %s, %s %s/s, %.1fs%s\n", label_.c_str(), fraction * 100,
                  human_count(done).c_str(), human_count(total_).c_str(), unit_.c_str(),

@@ -45,6 +45,7 @@ class ProgressBar {
   ProgressBar& operator=(const ProgressBar&) = delete;
 
   void advance(uint64_t amount);
+  bool enabled() const { return enabled_; }
   // Redraws (time and detail move on) without advancing.
   void tick();
   // Final line with the total and the mean rate.
@@ -70,7 +71,8 @@ class ProgressBar {
   bool finished_ = false;
 };
 
-// Ticks `bar` every 100 ms from its own thread until destroyed.
+// Ticks `bar` every 100 ms from its own thread until destroyed (no thread
+// for a disabled bar).
 class ProgressTicker {
  public:
   explicit ProgressTicker(ProgressBar& bar);
