@@ -233,13 +233,6 @@ class Router:
         with self._lock:
             return self._clients[address]
 
-    def any_client(self):
-        """A live replica's client (for calls whose answer is the same on all)."""
-        live = self._live()
-        if not live:
-            raise OutcoreError("UNAVAILABLE", "no replica is up")
-        return self.client(live[0])
-
     def _live(self) -> list[str]:
         now = time.monotonic()
         with self._lock:
