@@ -104,7 +104,8 @@ Status SceneQueryService::every_hit(const v1::QueryRequest& request, std::vector
                                     std::vector<RayHitRecord>* records, QueryStats& stats) {
   if (request.has_shared())
     return invalid_argument(
-        "request: shared payloads are for Intersect and Occluded; send the rays as bytes");
+        "request: shared payloads are for Intersect, Occluded and CountIntersections; send the rays as "
+        "bytes");
   const BatchPosition position;
   std::vector<Ray> widened;
   OUTCORE_ASSIGN_OR_RETURN(const std::span<const Ray> rays,
@@ -119,6 +120,13 @@ Status SceneQueryService::every_hit(const v1::QueryRequest& request, std::vector
 grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context,
                                                    const v1::QueryRequest* request,
                                                    v1::CountResponse* response) {
+  if (request->has_shared()) {
+    const auto start = Clock::now();
+    OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
+    return finish(context, "CountIntersections",
+                  answer_shared<QueryKind::kAllHits>(context, *request, response),
+                  request->batch().ray_count(), start);
+  }
   const auto run = [&]() -> Status {
     std::vector<uint32_t> counts;
     QueryStats stats;

@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cassert>
 #include <cstring>
 #include <vector>
 
@@ -71,8 +72,9 @@ Expected<std::span<const Ray>> SceneQueryService::check_request(const v1::QueryR
                                                                 const BatchPosition& position,
                                                                 std::vector<Ray>& storage) const {
   if (request.has_shared()) {
-    return invalid_argument(where(position) +
-                            ": shared payloads are for the unary calls (Intersect, Occluded), not streams");
+    return invalid_argument(
+        where(position) +
+        ": shared payloads are for the unary calls (Intersect, Occluded, CountIntersections), not streams");
   }
   if (request.hit_fields() != v1::HIT_FIELDS_ALL &&
       (kKind != QueryKind::kClosestHit || wire::hit_record_bytes(request.hit_fields()) == 0)) {
@@ -141,8 +143,15 @@ Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v
       status = engine_.intersect(rays, hits, query_options, stats);
       if (n) std::memcpy(out, static_cast<const void*>(hits.data()), n * sizeof(Hit));
     }
-  } else {
+  } else if constexpr (kKind == QueryKind::kAnyHit) {
     status = engine_.occluded(rays, std::span<uint8_t>(out, n), query_options, stats);
+  } else {
+    // Counts only (a shared CountIntersections): `out` is a call buffer's
+    // start, allocated with new, so aligned for uint32_t.
+    assert(reinterpret_cast<uintptr_t>(out) % alignof(uint32_t) == 0);
+    std::span<uint32_t> counts(reinterpret_cast<uint32_t*>(out), n);
+    std::fill(counts.begin(), counts.end(), 0u);
+    status = engine_.all_hits(rays, counts, nullptr, query_options, stats);
   }
   if (status.ok()) counters_.add_answered(*stats);
   return status;
@@ -157,6 +166,10 @@ template Status SceneQueryService::trace<QueryKind::kAnyHit>(std::span<const Ray
                                                              const v1::QueryRequest&,
                                                              const std::shared_ptr<const DynamicSnapshot>&,
                                                              QueryStats*);
+template Status SceneQueryService::trace<QueryKind::kAllHits>(std::span<const Ray>, uint8_t*,
+                                                              const v1::QueryRequest&,
+                                                              const std::shared_ptr<const DynamicSnapshot>&,
+                                                              QueryStats*);
 
 Expected<std::shared_ptr<const DynamicSnapshot>> SceneQueryService::dynamic_for(
     const v1::QueryRequest& request) const {

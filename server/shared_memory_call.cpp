@@ -1,6 +1,7 @@
 // The shared-memory unary call: a request whose rays are in the client's
 // shared-memory object (shared_payload.h) is answered into that object, in
 // groups of kSharedGroupRays through reused buffers, from loopback peers only.
+// Intersect, Occluded and CountIntersections (4-byte counts) take it.
 //
 // Thread-safety: as the service's handlers (scene_query_service.h).
 #include <grpcpp/grpcpp.h>
@@ -70,8 +71,15 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     if (!written.ok()) return to_grpc_status(written.with_context("request"));
     wire::add_to_wire(stats, wire_stats);
   }
-  set_reply_header(response, n, request.sequence());
-  response->set_dynamic_version((*dynamic)->version);
+  if constexpr (kKind == QueryKind::kAllHits) {
+    // Counts see the static scene only (the engine refuses a batch while
+    // the dynamic layer holds instances): no version, and no sequence.
+    response->set_layout_version(1);
+    response->set_ray_count(n);
+  } else {
+    set_reply_header(response, n, request.sequence());
+    response->set_dynamic_version((*dynamic)->version);
+  }
   response->set_answers_in_shared(true);
   return grpc::Status::OK;
 }
@@ -80,5 +88,7 @@ template grpc::Status SceneQueryService::answer_shared<QueryKind::kClosestHit, v
     grpc::ServerContext*, const v1::QueryRequest&, v1::IntersectResponse*);
 template grpc::Status SceneQueryService::answer_shared<QueryKind::kAnyHit, v1::OccludedResponse>(
     grpc::ServerContext*, const v1::QueryRequest&, v1::OccludedResponse*);
+template grpc::Status SceneQueryService::answer_shared<QueryKind::kAllHits, v1::CountResponse>(
+    grpc::ServerContext*, const v1::QueryRequest&, v1::CountResponse*);
 
 }  // namespace outcore::server

@@ -42,11 +42,13 @@ struct KindTraits<QueryKind::kAnyHit> {
   static std::string* payload(v1::OccludedResponse* response) { return response->mutable_occluded(); }
 };
 
-// Every hit has no stream and no shared payload: check_request reads only
-// the reply's size per ray (the counts; a list's hits come on top and are
-// checked once known, every_hit_and_point_calls.cpp).
+// Every hit has no stream; its counts (CountIntersections) may come through
+// a shared payload, 4 bytes a ray. check_request reads the reply's size per
+// ray (the counts; a list's hits come on top and are checked once known,
+// every_hit_and_point_calls.cpp).
 template <>
 struct KindTraits<QueryKind::kAllHits> {
+  using Response = v1::CountResponse;
   static constexpr uint64_t kReplyBytesPerRay = sizeof(uint32_t);
 };
 

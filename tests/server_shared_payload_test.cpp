@@ -518,5 +518,53 @@ TEST_F(ServerSharedPayload, BatchesLargerThanOneGroupAnswerAsTheEngineAndNameBad
       << refused.message();
 }
 
+// CountIntersections through a shared payload: the counts (4 bytes a ray)
+// land in the object, equal to the engine's; a token of another object is
+// PERMISSION_DENIED, a ListIntersections with one is named INVALID_ARGUMENT.
+TEST_F(ServerSharedPayload, CountsThroughSharedMemoryEqualTheEngines) {
+  const uint64_t n = 3000;
+  const std::vector<Ray> r = rays(n, 31);
+  auto object = SharedMemoryObject::create("cpp-" + std::to_string(getpid()) + "-test", kHeader + n * 64);
+  ASSERT_TRUE(object.ok()) << object.status().to_string();
+  std::memcpy(object->data() + kHeader, r.data(), n * sizeof(Ray));
+  std::vector<uint32_t> expected(n, 0);
+  ASSERT_TRUE(engine_->all_hits(r, expected, nullptr, QueryOptions{}).ok());
+  uint64_t total = 0;
+  for (const uint32_t c : expected) total += c;
+  ASSERT_GT(total, n / 10) << "the rays must hit something for the test to mean anything";
+
+  const v1::QueryRequest request = shared_request(*object, n);
+  {
+    grpc::ClientContext context;
+    v1::CountResponse response;
+    const grpc::Status status = stub_->CountIntersections(&context, request, &response);
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_TRUE(response.answers_in_shared());
+    EXPECT_TRUE(response.counts().empty());
+    EXPECT_EQ(response.ray_count(), n);
+    EXPECT_EQ(response.stats().rays(), n);
+    EXPECT_EQ(bytes_of(object->data() + kHeader + n * sizeof(Ray), n * sizeof(uint32_t)),
+              bytes_of(expected.data(), n * sizeof(uint32_t)));
+  }
+  {
+    auto other = SharedMemoryObject::create("cpp-" + std::to_string(getpid()) + "-test", 4096);
+    ASSERT_TRUE(other.ok());
+    v1::QueryRequest wrong_token = request;
+    wrong_token.mutable_shared()->set_token(other->token());
+    grpc::ClientContext context;
+    v1::CountResponse response;
+    const grpc::Status status = stub_->CountIntersections(&context, wrong_token, &response);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED) << status.error_message();
+  }
+  {
+    grpc::ClientContext context;
+    v1::ListResponse response;
+    const grpc::Status status = stub_->ListIntersections(&context, request, &response);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(status.error_message().find("send the rays as bytes"), std::string::npos)
+        << status.error_message();
+  }
+}
+
 }  // namespace
 }  // namespace outcore

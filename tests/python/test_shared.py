@@ -186,6 +186,35 @@ def test_server_refusing_a_shared_call_is_answered_through_bytes(refusing_server
     assert np.array_equal(occluded, np.isfinite(hits["t_hit"]))
 
 
+def test_shared_counts_equal_the_bytes_path_and_the_lists(server, refusing_server, bounds):
+    # count_intersections takes the same-host path as cast_rays: the same
+    # counts as the bytes path, as a list's splits, and as a server that
+    # refuses shared payloads; strict errors name the ray.
+    rays = make_rays(bounds, N, seed=145).reshape(40, N // 40, 6)
+    with outcore.SceneClient(server.address, timeout=60) as client:
+        counts = client.count_intersections(rays)
+        assert client.last_call_shared and client.last_stats["rays"] == N
+        assert counts.dtype == np.int32 and counts.shape == rays.shape[:-1]
+        listed = client.list_intersections(rays)
+        assert not client.last_call_shared  # lists go as bytes (their size is not known ahead)
+        bad = rays.reshape(-1, 6).copy()
+        bad[17_003, 0] = np.inf
+        with pytest.raises(outcore.OutcoreError, match="ray 17003") as error:
+            client.count_intersections(bad, strict=True)
+        assert error.value.code == "INVALID_ARGUMENT" and client._shared_disabled_reason is None
+    with outcore.SceneClient(server.address, timeout=60, shared_memory=False) as client:
+        by_bytes = client.count_intersections(rays)
+        assert not client.last_call_shared
+    with outcore.SceneClient(refusing_server.address, timeout=60) as client:
+        client._server_shared_payloads = True  # as if it had said yes: the call is refused, redone as bytes
+        refused = client.count_intersections(rays)
+        assert not client.last_call_shared and "--no-shared-payloads" in client._shared_disabled_reason
+    assert counts.sum() > N // 10, "the rays must hit something for the test to mean anything"
+    np.testing.assert_array_equal(counts, by_bytes)
+    np.testing.assert_array_equal(counts, refused)
+    np.testing.assert_array_equal(np.diff(listed["ray_splits"].astype(np.int64)), counts.ravel())
+
+
 def test_object_the_server_cannot_open_falls_back_to_bytes(server, bounds, monkeypatch):
     rays = make_rays(bounds, N, seed=160)
     want = bytes_answers(server.address, rays)[0]

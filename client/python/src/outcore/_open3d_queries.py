@@ -145,6 +145,11 @@ class Open3dQueries:
         # Requests serialised by _wire (one copy of the rays, no message object).
         call = self._plain_call(name, response)
         n = flat.shape[0]
+        if not listing and self._shared_wanted(n):
+            counts = self._counts_shared(call, name, flat, strict)
+            if counts is not None:
+                return counts, np.zeros(0, _wire.HIT_DTYPE)
+        self._last_call_shared = False
         chunk = max(1, min(n, (self._max_message_bytes - _MESSAGE_MARGIN) // (flat.shape[1] * 4), 1 << 18))
         counts, hits, stats = [], [], pb.QueryStats()
         start = 0
@@ -172,6 +177,26 @@ class Open3dQueries:
         all_counts = np.concatenate(counts) if counts else np.zeros(0, np.uint32)
         all_hits = np.concatenate(hits) if hits else np.zeros(0, _wire.HIT_DTYPE)
         return all_counts, all_hits
+
+    def _counts_shared(self, call, name: str, flat: np.ndarray, strict: bool):
+        """CountIntersections with the rays and counts in a shared segment
+        (as cast_rays' same-host path); None when they must go as bytes."""
+        n = flat.shape[0]
+
+        def parse(reply):  # a CountResponse (the call deserialises it)
+            if reply.ray_count != n or not reply.answers_in_shared or reply.counts:
+                raise OutcoreError("DATA_LOSS", f"malformed reply: ray_count {reply.ray_count} for {n} rays, "
+                                   f"answers_in_shared {reply.answers_in_shared}, {len(reply.counts)} "
+                                   "count bytes beside a shared payload", name)
+            return reply
+
+        done = self._shared_call(call, name, flat, np.dtype("<u4"), parse, strict=strict)
+        if done is None:
+            return None
+        reply, counts = done
+        self.last_stats = _message_to_dict(reply.stats)
+        self._last_call_shared = True
+        return counts
 
     def _points(self, query_points, kind, dtype: np.dtype, strict: bool) -> np.ndarray:
         """Answers (..., 3) points with one record of `dtype` each, shaped

@@ -500,14 +500,32 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
 
     def _query_shared(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray | None:
         """One unary call with the rays and answers in a shared segment. None
-        when the batch must go as bytes: the server refused the segment
-        (shared memory is then off for this client) or no segment of its
-        size can be made (then for batches at least as large). Other errors
-        raise as usual."""
+        when the batch must go as bytes (see _shared_call)."""
+        n = rays.shape[0]
+        done = self._shared_call(
+            self._calls[query.unary], query.unary, rays, query.record_dtype,
+            lambda data: self._unary_reply(query, data, n, shared=True),
+            strict=opts.strict, dynamic_version=opts.dynamic_version)
+        if done is None:
+            return None
+        reply, out = done
+        self.last_stats = _message_to_dict(pb.QueryStats.FromString(reply.stats))
+        self.last_dynamic_version = reply.dynamic_version
+        self._last_call_shared = True
+        return out
+
+    def _shared_call(self, call, method: str, rays: np.ndarray, answer_dtype: np.dtype, parse_reply,
+                     **encode_options):
+        """Calls `call` (unary, request as bytes) with the rays and the
+        answers (one `answer_dtype` record a ray) in a shared segment:
+        (parse_reply(reply bytes), answers). None when the batch must go as
+        bytes: the server refused the segment (shared memory is then off for
+        this client) or no segment of its size can be made (then for batches
+        at least as large). Other errors raise as usual."""
         n, columns = rays.shape
         rays_offset = _shared.HEADER_BYTES
         answers_offset = rays_offset + _shared.round_up(n * columns * 4, _shared.ALIGNMENT)
-        need = answers_offset + n * query.record_dtype.itemsize
+        need = answers_offset + n * np.dtype(answer_dtype).itemsize
         if need >= self._shared_failed_bytes:
             return None
         try:
@@ -522,25 +540,22 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         try:
             segment.write_rays(rays, rays_offset)
             request = _wire.encode_query(
-                rays, strict=opts.strict, dynamic_version=opts.dynamic_version,
-                shared=_wire.SharedRef(segment.name, rays_offset, answers_offset, segment.token))
+                rays, shared=_wire.SharedRef(segment.name, rays_offset, answers_offset, segment.token),
+                **encode_options)
             try:
-                data = self._calls[query.unary](request, timeout=self.timeout)
+                data = call(request, timeout=self.timeout)
             except grpc.RpcError as e:
                 if _refused(e):
                     details_fn = getattr(e, "details", None)
                     self._disable_shared((details_fn() if callable(details_fn) else None) or str(e))
                     return None
-                raise from_rpc_error(e, query.unary) from None
+                raise from_rpc_error(e, method) from None
             reusable = True
-            reply = self._unary_reply(query, data, n, shared=True)
-            out = segment.read_answers(query.record_dtype, n, answers_offset)
+            reply = parse_reply(data)
+            out = segment.read_answers(answer_dtype, n, answers_offset)
         finally:
             self._shared_pool.give(segment, reusable)
-        self.last_stats = _message_to_dict(pb.QueryStats.FromString(reply.stats))
-        self.last_dynamic_version = reply.dynamic_version
-        self._last_call_shared = True
-        return out
+        return reply, out
 
     def _query_stream(self, query: _Query, rays: np.ndarray, opts: _QueryOptions, chunk: int) -> np.ndarray:
         n = rays.shape[0]
