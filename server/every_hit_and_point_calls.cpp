@@ -1,6 +1,7 @@
 // Every hit (CountIntersections, ListIntersections) and point queries
 // (QueryPoints): the request checked as the ray calls check theirs, the
 // engine's answer packed in the layouts the proto names.
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -102,10 +103,8 @@ grpc::Status SceneQueryService::answer_once_wanted(grpc::ServerContext* context,
 
 Status SceneQueryService::every_hit(const v1::QueryRequest& request, std::vector<uint32_t>& counts,
                                     std::vector<RayHitRecord>* records, QueryStats& stats) {
-  if (request.has_shared())
-    return invalid_argument(
-        "request: shared payloads are for Intersect, Occluded and CountIntersections; send the rays as "
-        "bytes");
+  // Shared payloads are answered by answer_shared and answer_shared_list.
+  assert(!request.has_shared());
   const BatchPosition position;
   std::vector<Ray> widened;
   OUTCORE_ASSIGN_OR_RETURN(const std::span<const Ray> rays,
@@ -143,30 +142,42 @@ grpc::Status SceneQueryService::CountIntersections(grpc::ServerContext* context,
 grpc::Status SceneQueryService::ListIntersections(grpc::ServerContext* context,
                                                   const v1::QueryRequest* request,
                                                   v1::ListResponse* response) {
+  if (request->has_shared()) {
+    const auto start = Clock::now();
+    OUTCORE_RETURN_IF_GRPC_ERROR(authorize(*context));
+    return finish(context, "ListIntersections", answer_shared_list(context, *request, response),
+                  request->batch().ray_count(), start);
+  }
   const auto run = [&]() -> Status {
     std::vector<uint32_t> counts;
     std::vector<RayHitRecord> records;
     QueryStats stats;
     OUTCORE_RETURN_IF_ERROR(every_hit(*request, counts, &records, stats));
-    const uint64_t bytes = counts.size() * 4 + records.size() * sizeof(Hit) + kReplyOverheadBytes;
-    if (bytes > options_.max_message_bytes)
-      return resource_exhausted("request: the list of " + std::to_string(records.size()) + " hits on " +
-                                std::to_string(counts.size()) + " rays would take about " +
-                                std::to_string(bytes) + " bytes, over the server's max message size of " +
-                                std::to_string(options_.max_message_bytes) +
-                                " bytes (--max-message-mb); send fewer rays per message");
     response->set_layout_version(1);
     response->set_ray_count(counts.size());
-    response->mutable_counts()->assign(reinterpret_cast<const char*>(counts.data()), counts.size() * 4);
-    response->set_hit_count(records.size());
-    std::string* hits = response->mutable_hits();
-    hits->resize(records.size() * sizeof(Hit));
-    for (std::size_t k = 0; k < records.size(); ++k)
-      std::memcpy(hits->data() + k * sizeof(Hit), &records[k].hit, sizeof(Hit));
     wire::to_wire(stats, response->mutable_stats());
-    return Status::Ok();
+    return pack_list_reply(counts, records, response);
   };
   return answer_once_wanted(context, "ListIntersections", request->batch().ray_count(), run);
+}
+
+Status SceneQueryService::pack_list_reply(std::span<const uint32_t> counts,
+                                          const std::vector<RayHitRecord>& records,
+                                          v1::ListResponse* response) const {
+  const uint64_t bytes = counts.size() * 4 + records.size() * sizeof(Hit) + kReplyOverheadBytes;
+  if (bytes > options_.max_message_bytes)
+    return resource_exhausted("request: the list of " + std::to_string(records.size()) + " hits on " +
+                              std::to_string(counts.size()) + " rays would take about " +
+                              std::to_string(bytes) + " bytes, over the server's max message size of " +
+                              std::to_string(options_.max_message_bytes) +
+                              " bytes (--max-message-mb); send fewer rays per message");
+  response->mutable_counts()->assign(reinterpret_cast<const char*>(counts.data()), counts.size() * 4);
+  response->set_hit_count(records.size());
+  std::string* hits = response->mutable_hits();
+  hits->resize(records.size() * sizeof(Hit));
+  for (std::size_t k = 0; k < records.size(); ++k)
+    std::memcpy(hits->data() + k * sizeof(Hit), &records[k].hit, sizeof(Hit));
+  return Status::Ok();
 }
 
 grpc::Status SceneQueryService::QueryPoints(grpc::ServerContext* context, const v1::PointRequest* request,

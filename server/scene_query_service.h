@@ -186,6 +186,22 @@ class SceneQueryService final : public SceneQueryBase {
   template <QueryKind kKind, class Response>
   grpc::Status answer_shared(grpc::ServerContext* context, const v1::QueryRequest& request,
                              Response* response);
+  // The object a shared call names, checked (open_shared_payload), into
+  // `object`; or why not: FAILED_PRECONDITION with the refusal marker when
+  // the client should send bytes (--no-shared-payloads, not loopback, no
+  // such object of its user), another code naming what is malformed.
+  grpc::Status open_shared_call(grpc::ServerContext* context, const v1::QueryRequest& request,
+                                uint64_t answer_bytes_per_ray, uint64_t answers_room,
+                                std::shared_ptr<SharedMemoryObject>& object);
+  // ListIntersections with a shared payload: the counts and hits written
+  // into the object when they fit in shared.answers_bytes, else into the
+  // reply as without one.
+  grpc::Status answer_shared_list(grpc::ServerContext* context, const v1::QueryRequest& request,
+                                  v1::ListResponse* response);
+  // A ListResponse's counts and hits fields; RESOURCE_EXHAUSTED when they
+  // would exceed the max message size.
+  Status pack_list_reply(std::span<const uint32_t> counts, const std::vector<RayHitRecord>& records,
+                         v1::ListResponse* response) const;
   // Answers a stream's group of chunks with one engine call, one reply each
   // (`buffers` gathers a group of several chunks; unused for one).
   template <QueryKind kKind, class Response>

@@ -7,6 +7,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include <algorithm>
+#include <cstring>
 #include <span>
 #include <string>
 
@@ -18,10 +19,10 @@
 
 namespace outcore::server {
 
-template <QueryKind kKind, class Response>
-grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, const v1::QueryRequest& request,
-                                              Response* response) {
-  using Traits = KindTraits<kKind>;
+grpc::Status SceneQueryService::open_shared_call(grpc::ServerContext* context,
+                                                 const v1::QueryRequest& request,
+                                                 uint64_t answer_bytes_per_ray, uint64_t answers_room,
+                                                 std::shared_ptr<SharedMemoryObject>& object) {
   const auto refuse = [&](const std::string& why) {
     // The marker tells clients "send bytes from now on" apart from a failed call.
     context->AddTrailingMetadata(wire::kSharedRefusedKey, wire::kSharedRefusedValue);
@@ -36,11 +37,21 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
   if (!is_loopback_peer(context->peer())) {
     return refuse("shared payloads are accepted from loopback peers only, not from " + context->peer());
   }
-  auto object = open_shared_payload(request, Traits::kReplyBytesPerRay, shared_mappings_);
-  if (!object.ok()) {
-    if (object.status().code() == StatusCode::kFailedPrecondition) return refuse(object.status().message());
-    return to_grpc_status(object.status().with_context("request"));
+  auto opened = open_shared_payload(request, answer_bytes_per_ray, shared_mappings_, answers_room);
+  if (!opened.ok()) {
+    if (opened.status().code() == StatusCode::kFailedPrecondition) return refuse(opened.status().message());
+    return to_grpc_status(opened.status().with_context("request"));
   }
+  object = std::move(*opened);
+  return grpc::Status::OK;
+}
+
+template <QueryKind kKind, class Response>
+grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, const v1::QueryRequest& request,
+                                              Response* response) {
+  using Traits = KindTraits<kKind>;
+  std::shared_ptr<SharedMemoryObject> object;
+  OUTCORE_RETURN_IF_GRPC_ERROR(open_shared_call(context, request, Traits::kReplyBytesPerRay, 0, object));
   const uint64_t n = request.batch().ray_count();
   const ReusePool<CallBuffers>::Lease buffers = call_buffers_.take();
   v1::QueryStats* wire_stats = response->mutable_stats();
@@ -53,7 +64,7 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     const uint64_t first = group * kSharedGroupRays;
     const uint64_t count = std::min(kSharedGroupRays, n - first);
     OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n - first));
-    const Status read = read_shared_rays(**object, request, first, count, buffers->rays);
+    const Status read = read_shared_rays(*object, request, first, count, buffers->rays);
     if (!read.ok()) return to_grpc_status(read.with_context("request"));
     const std::span<const Ray> rays(buffers->rays.data(), count);
     BatchPosition position;
@@ -66,7 +77,7 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
     const Status status = trace<kKind>(rays, buffers->answers.data(), request, *dynamic, &stats);
     if (!status.ok()) return to_grpc_status(status);
     const Status written =
-        write_shared_answers(**object, request.shared(), first * Traits::kReplyBytesPerRay,
+        write_shared_answers(*object, request.shared(), first * Traits::kReplyBytesPerRay,
                              std::span<const uint8_t>(buffers->answers.data(), answer_bytes));
     if (!written.ok()) return to_grpc_status(written.with_context("request"));
     wire::add_to_wire(stats, wire_stats);
@@ -86,6 +97,57 @@ grpc::Status SceneQueryService::answer_shared(grpc::ServerContext* context, cons
 
 template grpc::Status SceneQueryService::answer_shared<QueryKind::kClosestHit, v1::IntersectResponse>(
     grpc::ServerContext*, const v1::QueryRequest&, v1::IntersectResponse*);
+grpc::Status SceneQueryService::answer_shared_list(grpc::ServerContext* context,
+                                                   const v1::QueryRequest& request,
+                                                   v1::ListResponse* response) {
+  const uint64_t n = request.batch().ray_count();
+  if (n > kSharedGroupRays) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        "request: a ListIntersections with a shared payload takes at most " +
+                            std::to_string(kSharedGroupRays) + " rays, not " + std::to_string(n) +
+                            "; send fewer rays per call");
+  }
+  const uint64_t room = request.shared().answers_bytes();
+  if (room == 0) {
+    return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                        "request: shared.answers_bytes is 0; a ListIntersections with a shared payload must "
+                        "say how much room its answers have (at least 4 bytes a ray)");
+  }
+  std::shared_ptr<SharedMemoryObject> object;
+  OUTCORE_RETURN_IF_GRPC_ERROR(open_shared_call(context, request, sizeof(uint32_t), room, object));
+  OUTCORE_RETURN_IF_GRPC_ERROR(check_still_wanted(context, "request", n));
+  const ReusePool<CallBuffers>::Lease buffers = call_buffers_.take();
+  const auto run = [&]() -> Status {
+    OUTCORE_RETURN_IF_ERROR(read_shared_rays(*object, request, 0, n, buffers->rays).with_context("request"));
+    const std::span<const Ray> rays(buffers->rays.data(), n);
+    OUTCORE_RETURN_IF_ERROR(check_rays(rays, BatchPosition{}, request.strict()));
+    std::vector<uint32_t> counts(n, 0);
+    std::vector<RayHitRecord> records;
+    QueryStats stats;
+    OUTCORE_ASSIGN_OR_RETURN(auto dynamic, dynamic_for(request));
+    OUTCORE_RETURN_IF_ERROR(engine_.all_hits(rays, counts, &records, options_of(request, dynamic), &stats));
+    counters_.add_answered(stats);
+    wire::to_wire(stats, response->mutable_stats());
+    response->set_layout_version(1);
+    response->set_ray_count(n);
+    response->set_hit_count(records.size());
+    const uint64_t hits_bytes = records.size() * sizeof(Hit);
+    if (n * sizeof(uint32_t) + hits_bytes > room) return pack_list_reply(counts, records, response);
+    // Counts then hits, packed through the call's buffer (the copies into the
+    // object are the SIGBUS-guarded ones).
+    std::vector<uint8_t>& packed = buffers->answers;
+    packed.resize(n * sizeof(uint32_t) + hits_bytes);
+    if (n != 0) std::memcpy(packed.data(), counts.data(), n * sizeof(uint32_t));
+    for (std::size_t k = 0; k < records.size(); ++k)
+      std::memcpy(packed.data() + n * sizeof(uint32_t) + k * sizeof(Hit), &records[k].hit, sizeof(Hit));
+    OUTCORE_RETURN_IF_ERROR(
+        write_shared_answers(*object, request.shared(), 0, packed).with_context("request"));
+    response->set_answers_in_shared(true);
+    return Status::Ok();
+  };
+  return to_grpc_status(run());
+}
+
 template grpc::Status SceneQueryService::answer_shared<QueryKind::kAnyHit, v1::OccludedResponse>(
     grpc::ServerContext*, const v1::QueryRequest&, v1::OccludedResponse*);
 template grpc::Status SceneQueryService::answer_shared<QueryKind::kAllHits, v1::CountResponse>(

@@ -87,7 +87,8 @@ bool is_loopback_peer(std::string_view peer) {
 
 Expected<std::shared_ptr<SharedMemoryObject>> open_shared_payload(const v1::QueryRequest& request,
                                                                   uint64_t answer_bytes_per_ray,
-                                                                  SharedMappingCache& mappings) {
+                                                                  SharedMappingCache& mappings,
+                                                                  uint64_t answers_room) {
   const v1::RayBatch& batch = request.batch();
   const v1::SharedPayload& payload = request.shared();
   OUTCORE_ASSIGN_OR_RETURN(const uint32_t ray_bytes, check_batch_layout(batch));
@@ -103,7 +104,12 @@ Expected<std::shared_ptr<SharedMemoryObject>> open_shared_payload(const v1::Quer
     return invalid_argument("batch.ray_count " + std::to_string(n) + " is beyond any shared-memory object");
   }
   const uint64_t rays_bytes = n * ray_bytes;
-  const uint64_t answers_bytes = n * answer_bytes_per_ray;
+  if (answers_room != 0 && (answers_room > kMaxOffset || answers_room < n * answer_bytes_per_ray)) {
+    return invalid_argument("shared.answers_bytes is " + std::to_string(answers_room) + "; " +
+                            std::to_string(n) + " rays need at least " +
+                            std::to_string(n * answer_bytes_per_ray));
+  }
+  const uint64_t answers_bytes = answers_room != 0 ? answers_room : n * answer_bytes_per_ray;
   uint64_t map_bytes = SharedMemoryObject::kHeaderBytes;
   for (const auto& [what, offset, bytes] :
        {std::tuple{"rays_offset", payload.rays_offset(), rays_bytes},

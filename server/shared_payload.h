@@ -44,9 +44,13 @@ bool is_loopback_peer(std::string_view peer);
 // a symbolic link: refused without waiting on it); PERMISSION_DENIED for a
 // token that does not match; FAILED_PRECONDITION when the object cannot be
 // opened or belongs to another user (a client then sends bytes).
+// `answers_room`: the answers range's size when the call's answers have no
+// fixed size per ray (ListIntersections: shared.answers_bytes, checked to
+// hold answer_bytes_per_ray a ray); 0: ray_count x answer_bytes_per_ray.
 Expected<std::shared_ptr<SharedMemoryObject>> open_shared_payload(const v1::QueryRequest& request,
                                                                   uint64_t answer_bytes_per_ray,
-                                                                  SharedMappingCache& mappings);
+                                                                  SharedMappingCache& mappings,
+                                                                  uint64_t answers_room = 0);
 
 // Copies rays [first, first + count) of the batch out of the object into
 // `storage` (resized to at least `count`; F32X6 widened).

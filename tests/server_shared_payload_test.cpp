@@ -520,11 +520,13 @@ TEST_F(ServerSharedPayload, BatchesLargerThanOneGroupAnswerAsTheEngineAndNameBad
 
 // CountIntersections through a shared payload: the counts (4 bytes a ray)
 // land in the object, equal to the engine's; a token of another object is
-// PERMISSION_DENIED, a ListIntersections with one is named INVALID_ARGUMENT.
+// PERMISSION_DENIED. ListIntersections likewise, within shared.answers_bytes.
 TEST_F(ServerSharedPayload, CountsThroughSharedMemoryEqualTheEngines) {
   const uint64_t n = 3000;
   const std::vector<Ray> r = rays(n, 31);
-  auto object = SharedMemoryObject::create("cpp-" + std::to_string(getpid()) + "-test", kHeader + n * 64);
+  constexpr uint64_t kBytesPerRay = 256;  // a ray, then room for its counts and hits
+  auto object =
+      SharedMemoryObject::create("cpp-" + std::to_string(getpid()) + "-test", kHeader + n * kBytesPerRay);
   ASSERT_TRUE(object.ok()) << object.status().to_string();
   std::memcpy(object->data() + kHeader, r.data(), n * sizeof(Ray));
   std::vector<uint32_t> expected(n, 0);
@@ -556,13 +558,48 @@ TEST_F(ServerSharedPayload, CountsThroughSharedMemoryEqualTheEngines) {
     const grpc::Status status = stub_->CountIntersections(&context, wrong_token, &response);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED) << status.error_message();
   }
-  {
+  // ListIntersections: its room must be named; counts then hits land in the
+  // object when they fit, in the reply's fields when they do not.
+  std::vector<uint32_t> counts(n, 0);
+  std::vector<RayHitRecord> records;
+  ASSERT_TRUE(engine_->all_hits(r, counts, &records, QueryOptions{}).ok());
+  std::string want_hits;
+  for (const RayHitRecord& record : records) want_hits += bytes_of(&record.hit, sizeof(Hit));
+  const auto list = [&](uint64_t room, v1::ListResponse* response) {
+    v1::QueryRequest listing = request;
+    listing.mutable_shared()->set_answers_bytes(room);
     grpc::ClientContext context;
+    return stub_->ListIntersections(&context, listing, response);
+  };
+  {
     v1::ListResponse response;
-    const grpc::Status status = stub_->ListIntersections(&context, request, &response);
+    const grpc::Status status = list(0, &response);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-    EXPECT_NE(status.error_message().find("send the rays as bytes"), std::string::npos)
-        << status.error_message();
+    EXPECT_NE(status.error_message().find("answers_bytes"), std::string::npos) << status.error_message();
+  }
+  {
+    v1::ListResponse response;
+    const grpc::Status status = list(n * (kBytesPerRay - sizeof(Ray)), &response);  // the rest of the object
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    ASSERT_TRUE(response.answers_in_shared());
+    EXPECT_TRUE(response.counts().empty() && response.hits().empty());
+    EXPECT_EQ(response.hit_count(), records.size());
+    const char* answers = object->data() + kHeader + n * sizeof(Ray);
+    EXPECT_EQ(bytes_of(answers, n * sizeof(uint32_t)), bytes_of(counts.data(), n * sizeof(uint32_t)));
+    EXPECT_EQ(bytes_of(answers + n * sizeof(uint32_t), want_hits.size()), want_hits);
+  }
+  {
+    v1::ListResponse response;
+    const grpc::Status status = list(n * sizeof(uint32_t), &response);  // room for the counts only
+    ASSERT_TRUE(status.ok()) << status.error_message();
+    EXPECT_FALSE(response.answers_in_shared());
+    EXPECT_EQ(response.counts(), bytes_of(counts.data(), n * sizeof(uint32_t)));
+    EXPECT_EQ(response.hits(), want_hits);
+  }
+  {
+    v1::ListResponse response;
+    const grpc::Status status = list(n * kBytesPerRay, &response);  // past the object's end
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
   }
 }
 

@@ -186,9 +186,10 @@ def test_server_refusing_a_shared_call_is_answered_through_bytes(refusing_server
     assert np.array_equal(occluded, np.isfinite(hits["t_hit"]))
 
 
-def test_shared_counts_equal_the_bytes_path_and_the_lists(server, refusing_server, bounds):
-    # count_intersections takes the same-host path as cast_rays: the same
-    # counts as the bytes path, as a list's splits, and as a server that
+def test_shared_counts_and_lists_equal_the_bytes_path(server, refusing_server, bounds):
+    # count_intersections and list_intersections take the same-host path as
+    # cast_rays: bitwise the bytes path's answers, also when a list outgrows
+    # its segment's room (its hits then come as bytes) and from a server that
     # refuses shared payloads; strict errors name the ray.
     rays = make_rays(bounds, N, seed=145).reshape(40, N // 40, 6)
     with outcore.SceneClient(server.address, timeout=60) as client:
@@ -196,7 +197,11 @@ def test_shared_counts_equal_the_bytes_path_and_the_lists(server, refusing_serve
         assert client.last_call_shared and client.last_stats["rays"] == N
         assert counts.dtype == np.int32 and counts.shape == rays.shape[:-1]
         listed = client.list_intersections(rays)
-        assert not client.last_call_shared  # lists go as bytes (their size is not known ahead)
+        assert client.last_call_shared and client.last_stats["rays"] == N
+        # A segment with too little room for the hits: they come in the reply's bytes.
+        client._list_hits_per_ray = 0.001
+        overflowed = client.list_intersections(rays)
+        assert client._list_hits_per_ray >= 1.0, "the next segment is sized from what this list held"
         bad = rays.reshape(-1, 6).copy()
         bad[17_003, 0] = np.inf
         with pytest.raises(outcore.OutcoreError, match="ray 17003") as error:
@@ -204,6 +209,7 @@ def test_shared_counts_equal_the_bytes_path_and_the_lists(server, refusing_serve
         assert error.value.code == "INVALID_ARGUMENT" and client._shared_disabled_reason is None
     with outcore.SceneClient(server.address, timeout=60, shared_memory=False) as client:
         by_bytes = client.count_intersections(rays)
+        listed_by_bytes = client.list_intersections(rays)
         assert not client.last_call_shared
     with outcore.SceneClient(refusing_server.address, timeout=60) as client:
         client._server_shared_payloads = True  # as if it had said yes: the call is refused, redone as bytes
@@ -213,6 +219,9 @@ def test_shared_counts_equal_the_bytes_path_and_the_lists(server, refusing_serve
     np.testing.assert_array_equal(counts, by_bytes)
     np.testing.assert_array_equal(counts, refused)
     np.testing.assert_array_equal(np.diff(listed["ray_splits"].astype(np.int64)), counts.ravel())
+    for key in listed:
+        np.testing.assert_array_equal(bits(listed[key]), bits(listed_by_bytes[key]), err_msg=key)
+        np.testing.assert_array_equal(bits(overflowed[key]), bits(listed_by_bytes[key]), err_msg=key)
 
 
 def test_object_the_server_cannot_open_falls_back_to_bytes(server, bounds, monkeypatch):
@@ -288,8 +297,8 @@ def test_another_segments_token_is_permission_denied_and_keeps_shared_memory_on(
     rays = make_rays(bounds, N, seed=185)
     real = _wire.SharedRef
     monkeypatch.setattr(_wire, "SharedRef",
-                        lambda name, rays_offset, answers_offset, token: real(name, rays_offset, answers_offset,
-                                                                              bytes(16)))
+                        lambda name, rays_offset, answers_offset, token, answers_bytes=0:
+                        real(name, rays_offset, answers_offset, bytes(16), answers_bytes))
     with outcore.SceneClient(server.address, timeout=60) as client:
         with pytest.raises(outcore.OutcoreError, match="token does not match") as error:
             client.cast_rays(rays)

@@ -25,6 +25,8 @@ from .v1 import scene_query_pb2 as pb
 _SERVICE = pb.DESCRIPTOR.services_by_name["SceneQuery"].full_name
 # Room in a message for everything but the packed rays or points.
 _MESSAGE_MARGIN = 16 * 1024
+# Rays per shared-memory ListIntersections call (the server's limit).
+_SHARED_LIST_RAYS = 1 << 20
 
 
 # QueryPoints' CLOSEST record (proto "Point queries").
@@ -47,6 +49,10 @@ def _check_nsamples(nsamples) -> None:
 class Open3dQueries:
     """The calls; SceneClient provides _channel, timeout,
     _max_message_bytes, _plain_calls and _call_plain."""
+
+    # Hits per ray of this client's last list: the room its next shared
+    # list's segment gets (x 1.25); a list that outgrows it comes as bytes.
+    _list_hits_per_ray = 2.0
 
     def count_intersections(self, rays, *, nthreads: int = 0, strict: bool = False) -> np.ndarray:
         """How many triangles each ray hits in (tnear, tfar], each once, as
@@ -145,10 +151,10 @@ class Open3dQueries:
         # Requests serialised by _wire (one copy of the rays, no message object).
         call = self._plain_call(name, response)
         n = flat.shape[0]
-        if not listing and self._shared_wanted(n):
-            counts = self._counts_shared(call, name, flat, strict)
-            if counts is not None:
-                return counts, np.zeros(0, _wire.HIT_DTYPE)
+        if self._shared_wanted(n):
+            done = self._every_hit_shared(call, name, flat, strict, listing)
+            if done is not None:
+                return done
         self._last_call_shared = False
         chunk = max(1, min(n, (self._max_message_bytes - _MESSAGE_MARGIN) // (flat.shape[1] * 4), 1 << 18))
         counts, hits, stats = [], [], pb.QueryStats()
@@ -178,25 +184,69 @@ class Open3dQueries:
         all_hits = np.concatenate(hits) if hits else np.zeros(0, _wire.HIT_DTYPE)
         return all_counts, all_hits
 
-    def _counts_shared(self, call, name: str, flat: np.ndarray, strict: bool):
-        """CountIntersections with the rays and counts in a shared segment
-        (as cast_rays' same-host path); None when they must go as bytes."""
+    def _every_hit_shared(self, call, name: str, flat: np.ndarray, strict: bool, listing: bool):
+        """_every_hit through shared segments (as cast_rays' same-host path):
+        counts in one call; lists in calls of at most _SHARED_LIST_RAYS rays,
+        each segment with room for the hits this client saw per ray so far
+        (a list that does not fit comes back in the reply's bytes). None when
+        the rays must go as bytes."""
         n = flat.shape[0]
+        if not listing:
+            def finish_counts(reply, segment, offset):  # a CountResponse (the call deserialises it)
+                self._check_every_hit_reply(reply, n, name, shared=True)
+                return reply, segment.read_answers(np.dtype("<u4"), n, offset)
 
-        def parse(reply):  # a CountResponse (the call deserialises it)
-            if reply.ray_count != n or not reply.answers_in_shared or reply.counts:
-                raise OutcoreError("DATA_LOSS", f"malformed reply: ray_count {reply.ray_count} for {n} rays, "
-                                   f"answers_in_shared {reply.answers_in_shared}, {len(reply.counts)} "
-                                   "count bytes beside a shared payload", name)
-            return reply
+            done = self._shared_call(call, name, flat, 4 * n, finish_counts, strict=strict)
+            if done is None:
+                return None
+            reply, counts = done
+            self.last_stats = _message_to_dict(reply.stats)
+            self._last_call_shared = True
+            return counts, np.zeros(0, _wire.HIT_DTYPE)
+        counts, hits, stats = [], [], pb.QueryStats()
+        for start in range(0, n, _SHARED_LIST_RAYS):
+            part = flat[start:start + _SHARED_LIST_RAYS]
+            m = part.shape[0]
+            room = 4 * m + _wire.HIT_DTYPE.itemsize * (int(m * 1.25 * self._list_hits_per_ray) + 64)
 
-        done = self._shared_call(call, name, flat, np.dtype("<u4"), parse, strict=strict)
-        if done is None:
-            return None
-        reply, counts = done
-        self.last_stats = _message_to_dict(reply.stats)
+            def finish_list(reply, segment, offset, m=m):
+                self._check_every_hit_reply(reply, m, name, shared=None)
+                if not reply.answers_in_shared:
+                    return reply, np.frombuffer(reply.counts, dtype="<u4"), \
+                        np.frombuffer(reply.hits, dtype=_wire.HIT_DTYPE)
+                return reply, segment.read_answers(np.dtype("<u4"), m, offset), \
+                    segment.read_answers(_wire.HIT_DTYPE, reply.hit_count, offset + 4 * m)
+
+            done = self._shared_call(call, name, part, room, finish_list, answers_room=True, strict=strict)
+            if done is None:
+                return None
+            reply, part_counts, part_hits = done
+            if reply.hit_count != int(part_counts.sum(dtype=np.uint64)):
+                raise OutcoreError("DATA_LOSS", "list reply's hits do not match its counts", name)
+            self._list_hits_per_ray = max(1.0, reply.hit_count / max(1, m))
+            counts.append(part_counts)
+            hits.append(part_hits)
+            add_fields(stats, reply.stats)
+        self.last_stats = _message_to_dict(stats)
         self._last_call_shared = True
-        return counts
+        return np.concatenate(counts), np.concatenate(hits)
+
+    @staticmethod
+    def _check_every_hit_reply(reply, n: int, name: str, shared) -> None:
+        """DATA_LOSS unless `reply` answers n rays, in shared memory (shared
+        True), in its bytes (False) or either (None)."""
+        in_shared = reply.answers_in_shared
+        problem = None
+        if reply.ray_count != n:
+            problem = f"ray_count {reply.ray_count} for {n} rays"
+        elif shared is not None and in_shared != shared:
+            problem = f"answers_in_shared {in_shared}, expected {shared}"
+        elif in_shared and reply.counts:
+            problem = f"{len(reply.counts)} count bytes beside answers in shared memory"
+        elif not in_shared and len(reply.counts) != 4 * n:
+            problem = f"{len(reply.counts)} count bytes for {n} rays"
+        if problem:
+            raise OutcoreError("DATA_LOSS", f"malformed reply: {problem}", name)
 
     def _points(self, query_points, kind, dtype: np.dtype, strict: bool) -> np.ndarray:
         """Answers (..., 3) points with one record of `dtype` each, shaped

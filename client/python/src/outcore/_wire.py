@@ -59,6 +59,7 @@ _TAG_SHARED_NAME = bytes([1 << 3 | _LEN])
 _TAG_SHARED_RAYS_OFFSET = bytes([2 << 3 | _VARINT])
 _TAG_SHARED_ANSWERS_OFFSET = bytes([3 << 3 | _VARINT])
 _TAG_SHARED_TOKEN = bytes([4 << 3 | _LEN])
+_TAG_SHARED_ANSWERS_BYTES = bytes([5 << 3 | _VARINT])
 # Reply fields (same numbers in IntersectResponse and OccludedResponse).
 _REPLY_VERSION, _REPLY_COUNT, _REPLY_PAYLOAD, _REPLY_SEQUENCE, _REPLY_STATS = 1, 2, 3, 4, 5
 _REPLY_ANSWERS_IN_SHARED = 6
@@ -67,13 +68,14 @@ _REPLY_DYNAMIC_VERSION = 7
 
 class SharedRef(NamedTuple):
     """A request's SharedPayload: the shared-memory object's name (with the
-    leading '/'), the byte offsets of the rays and of the answers in it, and
-    the token in its header."""
+    leading '/'), the byte offsets of the rays and of the answers in it, the
+    token in its header, and the answers' room (ListIntersections only)."""
 
     name: str
     rays_offset: int = 0
     answers_offset: int = 0
     token: bytes = b""
+    answers_bytes: int = 0
 
 
 class WireError(ValueError):
@@ -101,6 +103,8 @@ def _encode_shared(shared: SharedRef) -> bytes:
         parts += [_TAG_SHARED_ANSWERS_OFFSET, varint(shared.answers_offset)]
     if shared.token:
         parts += [_TAG_SHARED_TOKEN, varint(len(shared.token)), bytes(shared.token)]
+    if shared.answers_bytes:
+        parts += [_TAG_SHARED_ANSWERS_BYTES, varint(shared.answers_bytes)]
     body = b"".join(parts)
     return b"".join((_TAG_REQUEST_SHARED, varint(len(body)), body))
 

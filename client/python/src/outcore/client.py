@@ -502,10 +502,13 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         """One unary call with the rays and answers in a shared segment. None
         when the batch must go as bytes (see _shared_call)."""
         n = rays.shape[0]
-        done = self._shared_call(
-            self._calls[query.unary], query.unary, rays, query.record_dtype,
-            lambda data: self._unary_reply(query, data, n, shared=True),
-            strict=opts.strict, dynamic_version=opts.dynamic_version)
+
+        def finish(data, segment, answers_offset):
+            return (self._unary_reply(query, data, n, shared=True),
+                    segment.read_answers(query.record_dtype, n, answers_offset))
+
+        done = self._shared_call(self._calls[query.unary], query.unary, rays, n * query.record_dtype.itemsize,
+                                 finish, strict=opts.strict, dynamic_version=opts.dynamic_version)
         if done is None:
             return None
         reply, out = done
@@ -514,18 +517,20 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         self._last_call_shared = True
         return out
 
-    def _shared_call(self, call, method: str, rays: np.ndarray, answer_dtype: np.dtype, parse_reply,
+    def _shared_call(self, call, method: str, rays: np.ndarray, answers_bytes: int, finish, answers_room=False,
                      **encode_options):
         """Calls `call` (unary, request as bytes) with the rays and the
-        answers (one `answer_dtype` record a ray) in a shared segment:
-        (parse_reply(reply bytes), answers). None when the batch must go as
-        bytes: the server refused the segment (shared memory is then off for
-        this client) or no segment of its size can be made (then for batches
-        at least as large). Other errors raise as usual."""
+        answers in a shared segment, answers_bytes of room for them (also
+        sent as shared.answers_bytes when answers_room): finish(reply,
+        segment, answers_offset), run before the segment is given back.
+        None when the batch must go as bytes: the server refused the segment
+        (shared memory is then off for this client) or no segment of its
+        size can be made (then for batches at least as large). Other errors
+        raise as usual."""
         n, columns = rays.shape
         rays_offset = _shared.HEADER_BYTES
         answers_offset = rays_offset + _shared.round_up(n * columns * 4, _shared.ALIGNMENT)
-        need = answers_offset + n * np.dtype(answer_dtype).itemsize
+        need = answers_offset + answers_bytes
         if need >= self._shared_failed_bytes:
             return None
         try:
@@ -539,9 +544,9 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         reusable = False
         try:
             segment.write_rays(rays, rays_offset)
-            request = _wire.encode_query(
-                rays, shared=_wire.SharedRef(segment.name, rays_offset, answers_offset, segment.token),
-                **encode_options)
+            shared = _wire.SharedRef(segment.name, rays_offset, answers_offset, segment.token,
+                                     answers_bytes if answers_room else 0)
+            request = _wire.encode_query(rays, shared=shared, **encode_options)
             try:
                 data = call(request, timeout=self.timeout)
             except grpc.RpcError as e:
@@ -551,11 +556,9 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
                     return None
                 raise from_rpc_error(e, method) from None
             reusable = True
-            reply = parse_reply(data)
-            out = segment.read_answers(answer_dtype, n, answers_offset)
+            return finish(data, segment, answers_offset)
         finally:
             self._shared_pool.give(segment, reusable)
-        return reply, out
 
     def _query_stream(self, query: _Query, rays: np.ndarray, opts: _QueryOptions, chunk: int) -> np.ndarray:
         n = rays.shape[0]
