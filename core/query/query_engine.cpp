@@ -118,6 +118,28 @@ Status static_scene_only(const DynamicSnapshot& dynamic, const char* what) {
                              std::to_string(dynamic.version));
 }
 
+// `found` ordered by ray, then t, then ids, into `out`: placed by ray (a
+// counting sort: each ray's place is known from how many records the rays
+// before it have), then each ray's few records sorted in place. Linear in
+// the records where one sort of them all was not.
+void sort_by_ray_then_t(const std::vector<RayHitRecord>& found, std::size_t ray_count,
+                        std::vector<RayHitRecord>& out) {
+  std::vector<uint64_t> start(ray_count + 1, 0);
+  for (const RayHitRecord& r : found) ++start[r.ray + 1];
+  for (std::size_t i = 0; i < ray_count; ++i) start[i + 1] += start[i];
+  out.resize(found.size());
+  std::vector<uint64_t> next(start.begin(), start.end() - 1);
+  for (const RayHitRecord& r : found) out[next[r.ray]++] = r;
+  const auto before = [](const RayHitRecord& a, const RayHitRecord& b) {
+    if (a.hit.t != b.hit.t) return a.hit.t < b.hit.t;
+    if (a.hit.geometry_id != b.hit.geometry_id) return a.hit.geometry_id < b.hit.geometry_id;
+    return a.hit.primitive_id < b.hit.primitive_id;
+  };
+  for (std::size_t i = 0; i < ray_count; ++i) {
+    if (start[i + 1] - start[i] > 1) std::sort(out.begin() + start[i], out.begin() + start[i + 1], before);
+  }
+}
+
 }  // namespace
 
 Status QueryEngine::all_hits(std::span<const Ray> rays, std::span<uint32_t> counts,
@@ -133,13 +155,7 @@ Status QueryEngine::all_hits(std::span<const Ray> rays, std::span<uint32_t> coun
       rays, {.hit_counts = counts.data(), .collector = records != nullptr ? &collector : nullptr}, every_hit,
       stats));
   if (records == nullptr) return Status::Ok();
-  *records = std::move(collector.records);
-  std::sort(records->begin(), records->end(), [](const RayHitRecord& a, const RayHitRecord& b) {
-    if (a.ray != b.ray) return a.ray < b.ray;
-    if (a.hit.t != b.hit.t) return a.hit.t < b.hit.t;
-    if (a.hit.geometry_id != b.hit.geometry_id) return a.hit.geometry_id < b.hit.geometry_id;
-    return a.hit.primitive_id < b.hit.primitive_id;
-  });
+  sort_by_ray_then_t(collector.records, rays.size(), *records);
   return Status::Ok();
 }
 
