@@ -328,6 +328,7 @@ grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext* context, const
   response->set_server_version(OUTCORE_VERSION);
   response->set_max_message_bytes(options_.max_message_bytes);
   response->set_shared_payloads(options_.shared_payloads);
+  response->set_shared_every_hit_payloads(options_.shared_payloads);
   return grpc::Status::OK;
 }
 

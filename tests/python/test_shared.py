@@ -194,6 +194,7 @@ def test_shared_counts_and_lists_equal_the_bytes_path(server, refusing_server, b
     rays = make_rays(bounds, N, seed=145).reshape(40, N // 40, 6)
     with outcore.SceneClient(server.address, timeout=60) as client:
         counts = client.count_intersections(rays)
+        assert client.scene_info()["shared_every_hit_payloads"] is True
         assert client.last_call_shared and client.last_stats["rays"] == N
         assert counts.dtype == np.int32 and counts.shape == rays.shape[:-1]
         listed = client.list_intersections(rays)
@@ -212,7 +213,9 @@ def test_shared_counts_and_lists_equal_the_bytes_path(server, refusing_server, b
         listed_by_bytes = client.list_intersections(rays)
         assert not client.last_call_shared
     with outcore.SceneClient(refusing_server.address, timeout=60) as client:
-        client._server_shared_payloads = True  # as if it had said yes: the call is refused, redone as bytes
+        assert client.scene_info()["shared_every_hit_payloads"] is False
+        # As if it had said yes: the call is refused, redone as bytes.
+        client._server_shared_payloads = client._server_shared_every_hit = True
         refused = client.count_intersections(rays)
         assert not client.last_call_shared and "--no-shared-payloads" in client._shared_disabled_reason
     assert counts.sum() > N // 10, "the rays must hit something for the test to mean anything"

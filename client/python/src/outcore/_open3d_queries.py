@@ -151,7 +151,9 @@ class Open3dQueries:
         # Requests serialised by _wire (one copy of the rays, no message object).
         call = self._plain_call(name, response)
         n = flat.shape[0]
-        if self._shared_wanted(n):
+        # Only a server that says so takes every-hit calls through shared
+        # memory (an older one refuses them as INVALID_ARGUMENT).
+        if self._shared_wanted(n) and self._server_shared_every_hit:
             done = self._every_hit_shared(call, name, flat, strict, listing)
             if done is not None:
                 return done

@@ -202,6 +202,7 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         # Shared memory: only worth asking the server about for local targets.
         self._shared_local = _shared.supported() and _shared.is_loopback_target(address)
         self._server_shared_payloads: bool | None = None  # SceneInfo.shared_payloads, once asked
+        self._server_shared_every_hit = False  # SceneInfo.shared_every_hit_payloads
         # Why shared memory is off for this client after a failure (None: not off).
         self._shared_disabled_reason: str | None = None
         self._shared_pool = _shared.SegmentPool()
@@ -350,6 +351,7 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         info = self._call_plain(self._get_scene_info, pb.GetSceneInfoRequest(), "GetSceneInfo")
         self._server_max_message_bytes = info.max_message_bytes
         self._server_shared_payloads = info.shared_payloads
+        self._server_shared_every_hit = info.shared_every_hit_payloads
         return _message_to_dict(info)
 
     def stats(self) -> dict:
