@@ -8,6 +8,7 @@
 #include <signal.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstring>
 #include <map>
 #include <memory>
@@ -139,6 +140,57 @@ TEST_F(ReplicaRouterTest, RoutedAnswersAreOneServersBitwiseAndAKilledReplicaCost
       static_cast<std::size_t>(std::find(names.begin(), names.end(), servers[1]->address()) - names.begin());
   ASSERT_LT(dead, names.size());
   EXPECT_EQ((*router)->plan_loads(rays_)[dead], 0u);
+}
+
+// A dns: name resolved again (connect_resolved with a resolver whose list
+// changes, refresh 0): a replica that appears joins the ring and gets rays;
+// one that leaves gets none; a failed resolution keeps the replicas known;
+// answers stay one server's throughout.
+TEST_F(ReplicaRouterTest, AResolvedNameIsResolvedAgainAndItsReplicasFollow) {
+  auto servers = start(2);
+  ASSERT_EQ(servers.size(), 2u);
+  for (const auto& s : servers) ASSERT_NE(s, nullptr);
+  std::vector<Hit> reference(rays_.size());
+  {
+    auto one = SceneClient::connect(servers[0]->address());
+    ASSERT_TRUE(one.ok()) << one.status().message();
+    ASSERT_TRUE((*one)->intersect(rays_, reference).ok());
+  }
+  auto resolved =
+      std::make_shared<Expected<std::vector<std::string>>>(std::vector<std::string>{servers[0]->address()});
+  auto router =
+      ReplicaRouter::connect_resolved([resolved] { return *resolved; }, {}, std::chrono::milliseconds(0));
+  ASSERT_TRUE(router.ok()) << router.status().message();
+  std::vector<Hit> hits(rays_.size());
+  ASSERT_TRUE((*router)->intersect(rays_, hits).ok());
+  expect_same_hits(hits, reference);
+  EXPECT_EQ((*router)->replicas(), std::vector<std::string>{servers[0]->address()});
+
+  // Scaled up: the next batch resolves again and routes over both.
+  *resolved = std::vector<std::string>{servers[1]->address(), servers[0]->address()};
+  std::fill(hits.begin(), hits.end(), Hit{});
+  ASSERT_TRUE((*router)->intersect(rays_, hits).ok());
+  expect_same_hits(hits, reference);
+  ASSERT_EQ((*router)->replicas().size(), 2u);
+  for (const uint64_t load : (*router)->plan_loads(rays_)) EXPECT_GT(load, 0u);
+
+  // The resolver fails: the replicas known stay.
+  *resolved = io_error("no such name");
+  ASSERT_TRUE((*router)->intersect(rays_, hits).ok());
+  EXPECT_EQ((*router)->replicas().size(), 2u);
+
+  // Scaled down: the replica gone gets no rays, answers unchanged.
+  *resolved = std::vector<std::string>{servers[1]->address()};
+  std::fill(hits.begin(), hits.end(), Hit{});
+  ASSERT_TRUE((*router)->intersect(rays_, hits).ok());
+  expect_same_hits(hits, reference);
+  EXPECT_EQ((*router)->replicas(), std::vector<std::string>{servers[1]->address()});
+  EXPECT_EQ((*router)->failovers(), 0u);
+
+  // A dns: target that is not one is refused by name.
+  const auto wrong = ReplicaRouter::connect_dns("localhost:1");
+  ASSERT_FALSE(wrong.ok());
+  EXPECT_NE(wrong.status().message().find("not a dns: target"), std::string::npos);
 }
 
 }  // namespace

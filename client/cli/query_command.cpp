@@ -64,7 +64,10 @@ int run_query(const QueryArgs& args) {
     if (!connection.ok()) return report_command_error("query", connection.status().message());
     single = std::move(*connection);
   } else {
-    auto connection = client::ReplicaRouter::connect(replicas, connect_options);
+    // A dns: name is resolved again every 30 s (pods come and go).
+    auto connection = args.server.starts_with("dns:")
+                          ? client::ReplicaRouter::connect_dns(args.server, connect_options)
+                          : client::ReplicaRouter::connect(replicas, connect_options);
     if (!connection.ok()) return report_command_error("query", connection.status().message());
     router = std::move(*connection);
   }

@@ -89,15 +89,23 @@ Expected<std::vector<std::string>> replica_list(const std::string& server) {
   return list;
 }
 
-Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect(const std::vector<std::string>& addresses,
-                                                                const ConnectOptions& options) {
-  std::unique_ptr<ReplicaRouter> router(new ReplicaRouter());
+Expected<std::shared_ptr<const ReplicaRouter::Members>> ReplicaRouter::join(
+    const std::vector<std::string>& addresses, const Members* known) const {
+  auto members = std::make_shared<Members>();
   const std::vector<std::string> given = ReplicaRing(addresses).replicas();
   if (given.empty()) return invalid_argument("no replica given");
   Status first_error;
   for (const std::string& address : given) {
     if (address.empty()) return invalid_argument("an empty replica address in the list");
-    auto client = SceneClient::connect(address, options);
+    if (known != nullptr) {
+      const auto it = std::find(known->replicas.begin(), known->replicas.end(), address);
+      if (it != known->replicas.end()) {
+        members->replicas.push_back(address);
+        members->clients.push_back(known->clients[static_cast<std::size_t>(it - known->replicas.begin())]);
+        continue;
+      }
+    }
+    auto client = SceneClient::connect(address, options_);
     if (!client.ok()) {
       // Unreachable now: left out of the ring (a dns: name may list a pod
       // that is gone, or an address family the server does not listen on).
@@ -106,11 +114,19 @@ Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect(const std::vecto
       if (first_error.ok()) first_error = client.status().with_context("replica " + address);
       continue;
     }
-    router->replicas_.push_back(address);
-    router->clients_.push_back(std::move(*client));
+    members->replicas.push_back(address);
+    members->clients.push_back(std::move(*client));
   }
-  if (router->clients_.empty()) return first_error;
-  const v1::SceneInfo& info = router->clients_.front()->connected_scene();
+  if (members->clients.empty()) return first_error;
+  return std::shared_ptr<const Members>(std::move(members));
+}
+
+Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect(const std::vector<std::string>& addresses,
+                                                                const ConnectOptions& options) {
+  std::unique_ptr<ReplicaRouter> router(new ReplicaRouter());
+  router->options_ = options;
+  OUTCORE_ASSIGN_OR_RETURN(router->members_, router->join(addresses, nullptr));
+  const v1::SceneInfo& info = router->members_->clients.front()->connected_scene();
   if (info.bounds_lo_size() == 3 && info.bounds_hi_size() == 3) {
     router->lo_ = {info.bounds_lo(0), info.bounds_lo(1), info.bounds_lo(2)};
     router->hi_ = {info.bounds_hi(0), info.bounds_hi(1), info.bounds_hi(2)};
@@ -118,8 +134,53 @@ Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect(const std::vecto
   return router;
 }
 
+Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect_resolved(Resolver resolver,
+                                                                         const ConnectOptions& options,
+                                                                         std::chrono::milliseconds refresh) {
+  OUTCORE_ASSIGN_OR_RETURN(const std::vector<std::string> addresses, resolver());
+  OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<ReplicaRouter> router, connect(addresses, options));
+  router->resolver_ = std::move(resolver);
+  router->refresh_ = refresh;
+  router->next_refresh_ = std::chrono::steady_clock::now() + refresh;
+  return router;
+}
+
+Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect_dns(const std::string& target,
+                                                                    const ConnectOptions& options,
+                                                                    std::chrono::milliseconds refresh) {
+  if (!target.starts_with("dns:"))
+    return invalid_argument("connect_dns: " + target + " is not a dns: target");
+  return connect_resolved([target] { return resolve_dns(target); }, options, refresh);
+}
+
+std::shared_ptr<const ReplicaRouter::Members> ReplicaRouter::members() const {
+  std::lock_guard lock(mutex_);
+  return members_;
+}
+
+void ReplicaRouter::refresh_members() {
+  if (!resolver_) return;
+  std::lock_guard refreshing(refresh_mutex_);
+  const auto now = std::chrono::steady_clock::now();
+  if (now < next_refresh_) return;
+  next_refresh_ = now + refresh_;
+  const Expected<std::vector<std::string>> addresses = resolver_();
+  if (!addresses.ok()) return;  // a resolver's hiccup: the replicas known stay
+  const std::shared_ptr<const Members> current = members();
+  if (ReplicaRing(*addresses).replicas() == current->replicas) return;
+  Expected<std::shared_ptr<const Members>> joined = join(*addresses, current.get());
+  if (!joined.ok()) return;  // none reachable now: keep those known
+  std::lock_guard lock(mutex_);
+  members_ = std::move(*joined);
+  // Down marks of replicas that left the ring go with them.
+  std::erase_if(down_, [&](const std::string& address) {
+    return std::find(members_->replicas.begin(), members_->replicas.end(), address) ==
+           members_->replicas.end();
+  });
+}
+
 std::vector<std::string> ReplicaRouter::replicas() const {
-  return replicas_;
+  return members()->replicas;
 }
 
 uint64_t ReplicaRouter::failovers() const {
@@ -127,21 +188,21 @@ uint64_t ReplicaRouter::failovers() const {
   return failovers_;
 }
 
-std::vector<uint32_t> ReplicaRouter::route(std::span<const Ray> rays) const {
+std::vector<uint32_t> ReplicaRouter::route(const Members& members, std::span<const Ray> rays) const {
   std::vector<std::string> live;
   std::vector<uint32_t> index_of_live;
   {
     std::lock_guard lock(mutex_);
-    for (uint32_t r = 0; r < replicas_.size(); ++r) {
-      if (!down_.contains(r)) {
-        live.push_back(replicas_[r]);
+    for (uint32_t r = 0; r < members.replicas.size(); ++r) {
+      if (!down_.contains(members.replicas[r])) {
+        live.push_back(members.replicas[r]);
         index_of_live.push_back(r);
       }
     }
   }
   std::vector<uint32_t> replica_of_ray(rays.size(), 0);
   if (live.empty()) return replica_of_ray;
-  const ReplicaRing ring(live);  // sorted like replicas_, so indices map through index_of_live
+  const ReplicaRing ring(live);  // sorted like members.replicas, so indices map through index_of_live
   const std::vector<uint64_t> keys = route_keys(rays, lo_, hi_);
   std::map<uint64_t, uint64_t> counts;
   for (const uint64_t key : keys) ++counts[key];
@@ -151,8 +212,9 @@ std::vector<uint32_t> ReplicaRouter::route(std::span<const Ray> rays) const {
 }
 
 std::vector<uint64_t> ReplicaRouter::plan_loads(std::span<const Ray> rays) const {
-  std::vector<uint64_t> loads(replicas_.size(), 0);
-  for (const uint32_t r : route(rays)) ++loads[r];
+  const std::shared_ptr<const Members> snapshot = members();
+  std::vector<uint64_t> loads(snapshot->replicas.size(), 0);
+  for (const uint32_t r : route(*snapshot, rays)) ++loads[r];
   return loads;
 }
 
@@ -160,11 +222,16 @@ template <class Answer>
 Status ReplicaRouter::run(std::span<const Ray> rays, std::span<Answer> out, const CallOptions& options,
                           CallStats* stats) {
   if (out.size() != rays.size()) return invalid_argument("answers and rays differ in length");
+  refresh_members();
+  const std::shared_ptr<const Members> snapshot = members();
+  const Members& members = *snapshot;
   {
     std::lock_guard lock(mutex_);
-    if (down_.size() == replicas_.size()) down_.clear();  // all down: try them all again
+    const bool all_down = std::all_of(members.replicas.begin(), members.replicas.end(),
+                                      [&](const std::string& address) { return down_.contains(address); });
+    if (all_down) down_.clear();  // all down: try them all again
   }
-  const std::vector<uint32_t> replica_of_ray = route(rays);
+  const std::vector<uint32_t> replica_of_ray = route(members, rays);
   struct Part {
     uint32_t replica;
     std::vector<uint32_t> index;
@@ -173,7 +240,7 @@ Status ReplicaRouter::run(std::span<const Ray> rays, std::span<Answer> out, cons
     CallStats stats;
     Status status;
   };
-  std::vector<Part> parts(replicas_.size());
+  std::vector<Part> parts(members.replicas.size());
   for (uint32_t r = 0; r < parts.size(); ++r) parts[r].replica = r;
   for (uint32_t i = 0; i < replica_of_ray.size(); ++i) parts[replica_of_ray[i]].index.push_back(i);
   const CallOptions& part_options = options;
@@ -189,13 +256,15 @@ Status ReplicaRouter::run(std::span<const Ray> rays, std::span<Answer> out, cons
       while (true) {
         tried.insert(p->replica);
         p->stats = CallStats{};
-        p->status = call(*clients_[p->replica], p->rays, p->answers, part_options, &p->stats);
+        p->status = call(*members.clients[p->replica], p->rays, p->answers, part_options, &p->stats);
         if (p->status.ok() || p->status.code() != StatusCode::kIoError) return;
         std::lock_guard lock(mutex_);
-        down_.insert(p->replica);
-        const std::vector<uint32_t> next = ReplicaRing(replicas_).walk(ring_hash(replicas_[p->replica]));
-        const auto candidate = std::find_if(
-            next.begin(), next.end(), [&](uint32_t r) { return !tried.contains(r) && !down_.contains(r); });
+        down_.insert(members.replicas[p->replica]);
+        const std::vector<uint32_t> next =
+            ReplicaRing(members.replicas).walk(ring_hash(members.replicas[p->replica]));
+        const auto candidate = std::find_if(next.begin(), next.end(), [&](uint32_t r) {
+          return !tried.contains(r) && !down_.contains(members.replicas[r]);
+        });
         if (candidate == next.end()) return;  // every replica failed: the part's error stands
         p->replica = *candidate;
         ++failovers_;
@@ -205,7 +274,7 @@ Status ReplicaRouter::run(std::span<const Ray> rays, std::span<Answer> out, cons
   for (auto& task : running) task.get();
   for (Part& part : parts) {
     if (part.index.empty()) continue;
-    OUTCORE_RETURN_IF_ERROR(part.status.with_context("replica " + replicas_[part.replica]));
+    OUTCORE_RETURN_IF_ERROR(part.status.with_context("replica " + members.replicas[part.replica]));
     for (std::size_t k = 0; k < part.index.size(); ++k) out[part.index[k]] = part.answers[k];
     add_call_stats(part.stats, stats);
   }

@@ -4,12 +4,18 @@
 // unreachable (UNAVAILABLE, reported as IO_ERROR) goes to the next replica on
 // the ring, and that replica is left out of later batches. Any replica
 // answers any ray the same: routing changes cache hits and speed, never an
-// answer. `outcore query --server a,b,c` uses it.
+// answer. `outcore query --server a,b,c` uses it. Over a dns: target
+// (connect_dns) the name is resolved again before a batch once `refresh` has
+// passed: replicas that appeared join the ring, those gone leave it (a
+// headless Service scaled up or down), as the Python client does.
 //
 // Thread-safety: intersect/occluded may be called from several threads (the
-// replicas' clients are thread-safe; the set of down replicas is locked).
+// replicas' clients are thread-safe; each batch routes over one snapshot of
+// the replicas; the snapshot and the set of down replicas are locked).
 #pragma once
 
+#include <chrono>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -27,6 +33,19 @@ class ReplicaRouter {
   // is the first error when none can be reached.
   static Expected<std::unique_ptr<ReplicaRouter>> connect(const std::vector<std::string>& addresses,
                                                           const ConnectOptions& options = {});
+  // The replicas a "dns:///NAME:PORT" target resolves to, resolved again
+  // before a batch when `refresh` has passed since the last resolution (a
+  // failed resolution keeps the replicas known). Errors as connect() and
+  // replica_list().
+  using Resolver = std::function<Expected<std::vector<std::string>>()>;
+  static constexpr std::chrono::milliseconds kResolveEvery{30000};
+  static Expected<std::unique_ptr<ReplicaRouter>> connect_dns(
+      const std::string& target, const ConnectOptions& options = {},
+      std::chrono::milliseconds refresh = kResolveEvery);
+  // connect_dns over any resolver (tests: a list that changes).
+  static Expected<std::unique_ptr<ReplicaRouter>> connect_resolved(Resolver resolver,
+                                                                   const ConnectOptions& options,
+                                                                   std::chrono::milliseconds refresh);
 
   Status intersect(std::span<const Ray> rays, std::span<Hit> hits, const CallOptions& options = {},
                    CallStats* stats = nullptr);
@@ -40,17 +59,34 @@ class ReplicaRouter {
   std::vector<std::string> replicas() const;
 
  private:
+  // The replicas a batch routes over: sorted addresses and their clients.
+  struct Members {
+    std::vector<std::string> replicas;
+    std::vector<std::shared_ptr<SceneClient>> clients;
+  };
+
   ReplicaRouter() = default;
+  // Members for `addresses`, reusing the clients of `known` (may be null)
+  // and connecting the others; unreachable ones left out (see connect()).
+  Expected<std::shared_ptr<const Members>> join(const std::vector<std::string>& addresses,
+                                                const Members* known) const;
+  std::shared_ptr<const Members> members() const;
+  // Resolves again when due (connect_dns); keeps the members on failure.
+  void refresh_members();
   template <class Answer>
   Status run(std::span<const Ray> rays, std::span<Answer> out, const CallOptions& options, CallStats* stats);
-  // Each ray's replica (index into replicas_) among those up.
-  std::vector<uint32_t> route(std::span<const Ray> rays) const;
+  // Each ray's replica (index into members.replicas) among those up.
+  std::vector<uint32_t> route(const Members& members, std::span<const Ray> rays) const;
 
-  std::vector<std::string> replicas_;  // sorted
-  std::vector<std::unique_ptr<SceneClient>> clients_;
+  ConnectOptions options_;
   Vec3f lo_, hi_;
+  Resolver resolver_;  // empty for a fixed list
+  std::chrono::milliseconds refresh_{kResolveEvery};
+  std::mutex refresh_mutex_;  // one resolution at a time
+  std::chrono::steady_clock::time_point next_refresh_;
   mutable std::mutex mutex_;
-  std::set<uint32_t> down_;
+  std::shared_ptr<const Members> members_;
+  std::set<std::string> down_;  // by address
   uint64_t failovers_ = 0;
 };
 
