@@ -381,6 +381,7 @@ grpc::Status SceneQueryService::GetStats(grpc::ServerContext* context, const v1:
     response->set_subtree_loads(t.loads);
     response->set_subtree_loads_checked(t.loads_checked);
     response->set_subtree_loads_kept(t.loads_kept);
+    response->set_subtree_loads_recycled(t.loads_recycled);
     response->set_subtree_writes(t.writes);
     response->set_subtree_rejects(t.rejected());
     response->set_subtree_bytes_read(t.bytes_read);

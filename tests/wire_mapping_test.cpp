@@ -66,6 +66,7 @@ TEST(WireMapping, EveryWireFigureRoundTripsAndTheOthersStayOff) {
   EXPECT_EQ(wire::from_wire(wire).seconds_brick, twice.seconds_brick);
   EXPECT_EQ(wire::from_wire(wire).rays_in_brick_set, twice.rays_in_brick_set);
   EXPECT_EQ(wire.subtree_loads_kept(), 2 * stats.subtree_loads_kept);
+  EXPECT_EQ(wire.subtree_loads_recycled(), 2 * stats.subtree_loads_recycled);
 }
 
 TEST(WireMapping, TheServerSumsItsFiguresAndReportsThemInServerStats) {

@@ -123,13 +123,15 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
                                     const BrickSerializer& serializer,
                                     const std::optional<FileIdentity>& trusted,
                                     std::shared_ptr<PageReleaseQueue> release_queue,
-                                    std::shared_ptr<MappedFile> reuse) {
+                                    std::shared_ptr<MappedFile> reuse, bool reuse_pages_kept) {
   std::shared_ptr<MappedFile> file;
+  bool reused = false;
   if (reuse != nullptr) {
-    Status again = reuse->read_again(path);
+    Status again = reuse->read_again(path, reuse_pages_kept);
     if (again.ok()) {
       file = std::move(reuse);
-    } else if (again.code() != StatusCode::kFailedPrecondition) {  // another size: a new copy below
+      reused = true;
+    } else if (again.code() != StatusCode::kFailedPrecondition) {  // too large: a new copy below
       if (again.code() == StatusCode::kNotFound) return SubtreeReadResult{};
       return rejected(SubtreeRejection::kCorrupt, path, again.message());
     }
@@ -189,6 +191,7 @@ SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& k
   result.file_bytes = bytes.size();
   result.identity = identity;
   result.checked = !known_good;
+  result.reused = reused;
   result.payload = bytes.subspan(payload_offset, checked - payload_offset);
   result.file = file;
   Expected<std::unique_ptr<BrickAccel>> loaded =

@@ -88,6 +88,7 @@ struct SubtreeReadResult {
   uint64_t file_bytes = 0;
   FileIdentity identity;  // of the file read, when there was one
   bool checked = false;   // the checksum and structural checks ran (it was not trusted)
+  bool reused = false;    // read into the `reuse` copy (no new mapping)
 };
 
 // Writes `accel` under `key` to a new file at `path` (which must not exist);
@@ -101,14 +102,16 @@ Status write_subtree_file(const std::string& path, const SubtreeKey& key, const 
 // it, it is known good (see above): the checksum is verified, the structure
 // is not. `release_queue`: where the accel, once dropped while someone else
 // still holds the copy, queues its pages for release (nullptr: released at
-// once). `reuse`: a copy of an earlier read of this path that nobody else
-// holds (use_count 1), read again in place when the file kept its size, so
-// the load maps no memory; otherwise a new copy is made.
+// once). `reuse`: a copy that nobody else holds (use_count 1), of an
+// earlier read of this path or of another file, read into in place
+// (MappedFile::read_again, `reuse_pages_kept` passed on) when the file fits
+// its capacity, so the load maps no memory; otherwise a new copy is made.
 SubtreeReadResult read_subtree_file(const std::string& path, const SubtreeKey& key,
                                     const BrickSerializer& serializer,
                                     const std::optional<FileIdentity>& trusted = std::nullopt,
                                     std::shared_ptr<PageReleaseQueue> release_queue = nullptr,
-                                    std::shared_ptr<MappedFile> reuse = nullptr);
+                                    std::shared_ptr<MappedFile> reuse = nullptr,
+                                    bool reuse_pages_kept = false);
 
 // Loads again, in place and without checks, a payload read_subtree_file()
 // loaded into `file` before, whose pages were not released since (the copy

@@ -109,18 +109,19 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
     if (it != files_.end()) {
       trusted = it->second.known_good;
       if (it->second.mapping != nullptr) {
-        kept = std::move(it->second.mapping);
         kept_payload = std::exchange(it->second.payload, {});
-        --kept_mappings_;
+        kept = take_mapping_locked(it->second);
       }
     }
   }
+  bool intact = false;  // kept, with its pages
   if (kept != nullptr) {
     // Still queued for release: its pages, hence its checked bytes, are
     // intact, and they are our own memory, so the file's state is moot.
-    const bool intact = release_queue_ != nullptr && release_queue_->cancel(kept.get());
+    intact = release_queue_ != nullptr && release_queue_->cancel(kept.get());
     if (kept.use_count() != 1) {
       kept.reset();  // a brick or a release batch still reads it: not ours to reuse
+      intact = false;
     } else if (intact) {
       std::unique_ptr<BrickAccel> accel =
           load_subtree_payload(kept, kept_payload, key, serializer_, release_queue_);
@@ -138,9 +139,19 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
       }
     }
   }
-  const bool reused = kept != nullptr;
+  // Its own copy's pages are gone (or it has none): another evicted brick's
+  // queued copy, still populated, is cheaper to read into.
+  // (An intact copy whose payload the serialiser refused, which it never
+  // should, is read again as it is: given away, its pages would stay.)
+  std::shared_ptr<MappedFile> recycled;
+  if (!intact) {
+    std::lock_guard lock(mutex_);
+    recycled = take_queued_copy_locked(name, kept);
+  }
+  const bool recycling = recycled != nullptr;
   SubtreeReadResult read =
-      read_subtree_file(path, key, serializer_, trusted, release_queue_, std::move(kept));
+      read_subtree_file(path, key, serializer_, trusted, release_queue_,
+                        recycling ? std::move(recycled) : std::move(kept), recycling || intact);
   const double seconds = seconds_since(start);
 
   std::lock_guard lock(mutex_);
@@ -148,7 +159,7 @@ std::unique_ptr<BrickAccel> SubtreeTier::load(const SubtreeKey& key) {
     case SubtreeRejection::kNone: {
       ++counters_.loads;
       if (read.checked) ++counters_.loads_checked;
-      if (reused) ++counters_.loads_kept;
+      if (read.reused) ++(recycling ? counters_.loads_recycled : counters_.loads_kept);
       counters_.bytes_read += read.file_bytes;
       counters_.load_seconds += seconds;
       const auto it = files_.find(name);
@@ -240,12 +251,60 @@ void SubtreeTier::keep_mapping_locked(const std::string& name, const std::shared
                                       std::span<const char> payload) {
   const auto it = files_.find(name);
   if (it == files_.end() || file == nullptr || it->second.mapping == file) return;
-  if (it->second.mapping == nullptr) {
+  if (it->second.mapping != nullptr) {
+    owner_of_.erase(it->second.mapping.get());
+  } else {
     if (kept_mappings_ >= kMaxKeptMappings) return;
     ++kept_mappings_;
   }
   it->second.mapping = file;
   it->second.payload = payload;
+  owner_of_[file.get()] = &it->second;
+}
+
+std::shared_ptr<MappedFile> SubtreeTier::take_mapping_locked(FileEntry& entry) {
+  if (entry.mapping == nullptr) return nullptr;
+  owner_of_.erase(entry.mapping.get());
+  --kept_mappings_;
+  entry.payload = {};
+  return std::move(entry.mapping);
+}
+
+std::shared_ptr<MappedFile> SubtreeTier::take_queued_copy_locked(const std::string& name,
+                                                                 std::shared_ptr<MappedFile>& released) {
+  if (release_queue_ == nullptr) return nullptr;
+  const auto it = files_.find(name);
+  if (it == files_.end()) return nullptr;
+  std::shared_ptr<const MappedFile> queued =
+      release_queue_->take(it->second.bytes, [&](const std::shared_ptr<const MappedFile>& copy) {
+        // Held by the queue alone: its file was forgotten. Taken only when
+        // the loader has no released copy, which would otherwise be unmapped
+        // here, with nobody to give it to.
+        if (copy.use_count() == 1) return released == nullptr;
+        // Held by the queue and its brick's entry, nobody else: no accel
+        // reads it, no load of that brick has taken it out (the entry would
+        // no longer hold it), no release batch holds it. The brick gets the
+        // loader's released copy in exchange, which must fit its file.
+        const auto owner = owner_of_.find(copy.get());
+        return copy.use_count() == 2 && owner != owner_of_.end() &&
+               owner->second->mapping.get() == copy.get() &&
+               (released == nullptr || released->capacity() >= copy->bytes().size());
+      });
+  if (queued == nullptr) return nullptr;
+  // Made by this tier as a mutable MappedFile; the queue holds copies const.
+  std::shared_ptr<MappedFile> copy = std::const_pointer_cast<MappedFile>(std::move(queued));
+  if (const auto owner = owner_of_.find(copy.get()); owner != owner_of_.end()) {
+    FileEntry& loser = *owner->second;
+    (void)take_mapping_locked(loser);
+    // Its next load reads its file into the exchanged copy (not queued, so
+    // never taken for intact), or into a new one when it has none.
+    if (released != nullptr) {
+      loser.mapping = std::move(released);
+      owner_of_[loser.mapping.get()] = &loser;
+      ++kept_mappings_;
+    }
+  }
+  return copy;
 }
 
 void SubtreeTier::evict_locked(uint64_t incoming) {
@@ -266,7 +325,7 @@ void SubtreeTier::forget_locked(const std::string& name) {
   if (it == files_.end()) return;
   --counters_.files;
   counters_.bytes -= it->second.bytes;
-  if (it->second.mapping != nullptr) --kept_mappings_;
+  (void)take_mapping_locked(it->second);
   files_.erase(it);
 }
 

@@ -45,18 +45,33 @@
 // - Copies are kept (up to kMaxKeptMappings): a loaded or written file's
 //   copy stays mapped after the cache evicts its brick, with its pages
 //   released (MappedFile::release_pages: they leave the RSS), and the next
-//   load of that brick reads the file again into the same memory: no mmap or
-//   munmap, which take the process's mapping lock for writing and stall
-//   every other thread's page faults (a warm batch at a quarter budget loads
-//   thousands of bricks). Released pages are batched (PageReleaseQueue,
-//   release_batch_bytes of copies at most, flushed at the end of each query
-//   batch), and a queued copy loaded again is taken out of the queue with its
-//   pages: its bytes, checked and our own, are used without reading the file.
-//   A kept copy is dropped when this tier deletes the file or forgets it.
+//   load of that brick reads the file again into that memory (or into a
+//   recycled copy, below): no mmap or munmap, which take the process's
+//   mapping lock for writing and stall every other thread's page faults (a
+//   warm batch at a quarter budget loads thousands of bricks). Released
+//   pages are batched (PageReleaseQueue, release_batch_bytes of copies at
+//   most, flushed at the end of each query batch), and a queued copy loaded
+//   again is taken out of the queue with its pages: its bytes, checked and
+//   our own, are used without reading the file. A kept copy is dropped when
+//   this tier deletes the file or forgets it.
+// - Queued copies are recycled: a load whose own copy's pages were released
+//   (or that has none) takes another evicted brick's copy still waiting in
+//   the release queue, pages populated, and reads its file into those pages
+//   (MappedFile::read_again), instead of populating released pages again
+//   (most of such a load's cost). That brick gets the loader's released copy
+//   in exchange, into which its own next load reads (or none, when the
+//   loader had none: its next load then recycles in turn or makes a new
+//   copy, so copies are made at most once per brick). Only a copy nobody
+//   else holds is taken (its brick's entry and the queue: no accel reads
+//   it), of a capacity that fits the file and with no more pages populated
+//   than the file fills, so the RSS holds only what the cache accounts for
+//   the loaded brick, as for any load; the queue holds less meanwhile. The
+//   checksum is verified as for any read.
 //
 // Thread-safety: all member functions may be called from any thread; one
 // mutex guards the index and is held for renames and deletions, never while
-// reading, checking or writing a file.
+// reading, checking or writing a file; the release queue's lock is taken
+// under it (to take a queued copy), never the other way round.
 #pragma once
 
 #include <cstdint>
@@ -65,6 +80,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <unordered_map>
 
 #include "core/accel/brick_serializer.h"
 #include "core/cache/subtree_file.h"
@@ -97,12 +113,13 @@ struct SubtreeTierCounters {
   uint64_t files_evicted = 0;
   uint64_t bytes_read = 0;  // of the files loaded
   uint64_t bytes_written = 0;
-  uint64_t loads_checked = 0;  // of the loads, those that checked the file in full
-  uint64_t loads_kept = 0;     // of the loads, those that reused a kept mapping
-  double load_seconds = 0;     // map + check + deserialise, summed over loads
-  double write_seconds = 0;    // serialise + write + rename, summed over writes
-  uint64_t files = 0;          // in the directory now, as far as this tier knows
-  uint64_t bytes = 0;          // their size
+  uint64_t loads_checked = 0;   // of the loads, those that checked the file in full
+  uint64_t loads_kept = 0;      // of the loads, those that reused their brick's kept copy
+  uint64_t loads_recycled = 0;  // those that read into another evicted brick's queued copy
+  double load_seconds = 0;      // map + check + deserialise, summed over loads
+  double write_seconds = 0;     // serialise + write + rename, summed over writes
+  uint64_t files = 0;           // in the directory now, as far as this tier knows
+  uint64_t bytes = 0;           // their size
 
   uint64_t rejected() const { return rejected_corrupt + rejected_version + rejected_stale; }
 };
@@ -161,6 +178,14 @@ class SubtreeTier {
   // entry for `name`, if known and below the limit.
   void keep_mapping_locked(const std::string& name, const std::shared_ptr<MappedFile>& file,
                            std::span<const char> payload);
+  // Under the lock: the entry's kept copy, taken out of it (nullptr: none).
+  std::shared_ptr<MappedFile> take_mapping_locked(FileEntry& entry);
+  // Under the lock: another brick's copy, taken out of the release queue
+  // (pages populated) to read the file `name` into, or nullptr (see above).
+  // `released`, the loader's own copy (pages released) or nullptr, goes to
+  // the entry that loses the copy, if any.
+  std::shared_ptr<MappedFile> take_queued_copy_locked(const std::string& name,
+                                                      std::shared_ptr<MappedFile>& released);
 
   const SubtreeTierOptions options_;
   const BrickSerializer& serializer_;
@@ -170,6 +195,8 @@ class SubtreeTier {
 
   mutable std::mutex mutex_;
   std::map<std::string, FileEntry> files_;  // by file name
+  // The entry keeping each kept copy (map nodes do not move).
+  std::unordered_map<const MappedFile*, FileEntry*> owner_of_;
   uint64_t use_clock_ = 0;
   uint64_t kept_mappings_ = 0;
   bool logged_write_failure_ = false;

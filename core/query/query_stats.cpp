@@ -93,11 +93,12 @@ std::string QueryStats::to_text() const {
   if (subtree_loads + subtree_writes + subtree_rejects > 0) {
     std::snprintf(
         buf, sizeof buf,
-        "  subtree tier: %llu loads (%llu checked in full, %llu on kept mappings; %.1f MiB, %.3f s), %llu "
-        "writes (%.1f MiB), %llu rejected; builds %.3f s\n",
+        "  subtree tier: %llu loads (%llu checked in full, %llu on kept copies, %llu recycled; %.1f MiB, "
+        "%.3f s), %llu writes (%.1f MiB), %llu rejected; builds %.3f s\n",
         static_cast<unsigned long long>(subtree_loads),
         static_cast<unsigned long long>(subtree_loads_checked),
-        static_cast<unsigned long long>(subtree_loads_kept), subtree_bytes_read / 1048576.0,
+        static_cast<unsigned long long>(subtree_loads_kept),
+        static_cast<unsigned long long>(subtree_loads_recycled), subtree_bytes_read / 1048576.0,
         seconds_subtree_loads, static_cast<unsigned long long>(subtree_writes),
         subtree_bytes_written / 1048576.0, static_cast<unsigned long long>(subtree_rejects),
         seconds_brick_builds);

@@ -93,11 +93,14 @@ enum class StatsServer { kNo, kYes };
   OUTCORE_STRUCTURE_BUILDS(X)                                                                       \
   X(uint64_t, evictions,               "",        "evictions",               kSum, kYes, kNo)       \
   /* subtree tier (0 without one): misses served by loading a file; of them */                      \
-  /* those checked in full (first loads) and those on a kept mapping; files */                      \
-  /* written; files refused (corrupt, other version, stale; each then built) */                     \
+  /* those checked in full (first loads), those read into their brick's */                         \
+  /* kept copy and those into another evicted brick's queued one (both */                           \
+  /* mapping no memory); files written; files refused (corrupt, other */                            \
+  /* version, stale; each then built) */                                                            \
   X(uint64_t, subtree_loads,           "",        "subtree_loads",           kSum, kYes, kNo)       \
   X(uint64_t, subtree_loads_checked,   "",        "subtree_loads_checked",   kSum, kYes, kNo)       \
   X(uint64_t, subtree_loads_kept,      "",        "subtree_loads_kept",      kSum, kYes, kNo)       \
+  X(uint64_t, subtree_loads_recycled,  "",        "subtree_loads_recycled",  kSum, kYes, kNo)       \
   X(uint64_t, subtree_writes,          "",        "subtree_writes",          kSum, kYes, kNo)       \
   X(uint64_t, subtree_rejects,         "",        "subtree_rejects",         kSum, kYes, kNo)       \
   X(uint64_t, subtree_bytes_read,      "",        "subtree_bytes_read",      kSum, kYes, kNo)       \

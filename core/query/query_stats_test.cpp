@@ -47,6 +47,7 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
   stats.brick_rebuilds = 96, stats.builds_bvh = 95, stats.builds_grid = 94;
   stats.dynamic_version = 93, stats.dynamic_instances = 92, stats.rays_hit_only_dynamic = 91;
   stats.seconds_dynamic = 3.75;
+  stats.subtree_loads_recycled = 90;
   EXPECT_EQ(stats.to_json(),
             R"({"rays":1,"invalid_rays":2,"rays_hit":3,"upper_nodes_visited":4,"rays_entering_no_brick":99,)"
             R"("brick_visits":5,"brick_visits_without_hit":98,)"
@@ -56,8 +57,8 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
             R"("brick_builds":14,"brick_rebuilds":96,"brick_builds_by_structure":{"embree":0,"bvh":95,)"
             R"("kdtree":0,"bsp":0,"grid":94,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"
             R"("evictions":15,"subtree_loads":16,"subtree_loads_checked":17,)"
-            R"("subtree_loads_kept":18,"subtree_writes":19,"subtree_rejects":20,"subtree_bytes_read":21,)"
-            R"("subtree_bytes_written":22,)"
+            R"("subtree_loads_kept":18,"subtree_loads_recycled":90,"subtree_writes":19,"subtree_rejects":20,)"
+            R"("subtree_bytes_read":21,"subtree_bytes_written":22,)"
             R"("dynamic":{"version":93,"instances":92,"rays_hit_only_dynamic":91},)"
             R"("peak_bytes_resident":23,"cache_budget_bytes":24,)"
             R"("seconds":{"total":0.25,"upper":0.75,"build":1.25,"brick":1.75,"proxy":2.25,)"
@@ -71,8 +72,8 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
             R"("brick_builds":0,"brick_rebuilds":0,"brick_builds_by_structure":{"embree":0,"bvh":0,)"
             R"("kdtree":0,"bsp":0,"grid":0,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"
             R"("evictions":0,"subtree_loads":0,"subtree_loads_checked":0,)"
-            R"("subtree_loads_kept":0,"subtree_writes":0,"subtree_rejects":0,"subtree_bytes_read":0,)"
-            R"("subtree_bytes_written":0,)"
+            R"("subtree_loads_kept":0,"subtree_loads_recycled":0,"subtree_writes":0,"subtree_rejects":0,)"
+            R"("subtree_bytes_read":0,"subtree_bytes_written":0,)"
             R"("dynamic":{"version":0,"instances":0,"rays_hit_only_dynamic":0},)"
             R"("peak_bytes_resident":0,"cache_budget_bytes":0,)"
             R"("seconds":{"total":0,"upper":0,"build":0,"brick":0,"proxy":0,)"

@@ -41,6 +41,7 @@ void finish_batch_stats(BatchTally& tally, const BrickCache& cache, const CacheC
   stats.subtree_loads = tier_after.loads - tier_before.loads;
   stats.subtree_loads_checked = tier_after.loads_checked - tier_before.loads_checked;
   stats.subtree_loads_kept = tier_after.loads_kept - tier_before.loads_kept;
+  stats.subtree_loads_recycled = tier_after.loads_recycled - tier_before.loads_recycled;
   stats.subtree_writes = tier_after.writes - tier_before.writes;
   stats.subtree_rejects = tier_after.rejected() - tier_before.rejected();
   stats.subtree_bytes_read = tier_after.bytes_read - tier_before.bytes_read;

@@ -55,6 +55,27 @@ Expected<int> open_for_reading(const std::string& path, struct stat* info) {
   return fd;
 }
 
+std::size_t round_up(std::size_t bytes, std::size_t step) {
+  return (bytes + step - 1) / step * step;
+}
+
+std::size_t page_bytes() {
+  static const std::size_t bytes = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  return bytes;
+}
+
+// Maps `bytes` from `data` (page aligned) in one call rather than a fault
+// per page as the read writes them (about a quarter of a 2 MB read); a hint
+// (Linux >= 5.14): without it the read faults them in.
+void populate(char* data, std::size_t bytes) {
+#ifdef MADV_POPULATE_WRITE
+  if (bytes > 0) (void)madvise(data, bytes, MADV_POPULATE_WRITE);
+#else
+  (void)data;
+  (void)bytes;
+#endif
+}
+
 }  // namespace
 
 FileIdentity identity_of(const struct stat& info) {
@@ -74,20 +95,22 @@ Expected<FileIdentity> file_identity(const std::string& path) {
 }
 
 MappedFile::~MappedFile() {
-  if (data_ != nullptr) munmap(const_cast<char*>(data_), size_);
+  if (data_ != nullptr) munmap(const_cast<char*>(data_), capacity_);
 }
 
 MappedFile::MappedFile(MappedFile&& other) noexcept
     : data_(std::exchange(other.data_, nullptr)),
       size_(std::exchange(other.size_, 0)),
+      capacity_(std::exchange(other.capacity_, 0)),
       identity_(other.identity_),
       copy_(other.copy_) {}
 
 MappedFile& MappedFile::operator=(MappedFile&& other) noexcept {
   if (this != &other) {
-    if (data_ != nullptr) munmap(const_cast<char*>(data_), size_);
+    if (data_ != nullptr) munmap(const_cast<char*>(data_), capacity_);
     data_ = std::exchange(other.data_, nullptr);
     size_ = std::exchange(other.size_, 0);
+    capacity_ = std::exchange(other.capacity_, 0);
     identity_ = other.identity_;
     copy_ = other.copy_;
   }
@@ -97,6 +120,7 @@ MappedFile& MappedFile::operator=(MappedFile&& other) noexcept {
 void MappedFile::release_pages() const {
   // A read-only file mapping has no dirty pages: dropping them loses nothing.
   // A copy loses its bytes, which its owner reads again (read_again) first.
+  // Past size_ a copy has no populated pages (read_again keeps it so).
   if (data_ != nullptr) (void)madvise(const_cast<char*>(data_), size_, MADV_DONTNEED);
 }
 
@@ -115,6 +139,7 @@ Expected<MappedFile> MappedFile::open(const std::string& path) {
       return io_error("cannot map " + path + ": " + std::strerror(error));
     }
     file.data_ = static_cast<const char*>(data);
+    file.capacity_ = file.size_;
   }
   ::close(fd);  // the mapping keeps the file
   return file;
@@ -129,18 +154,20 @@ Expected<MappedFile> MappedFile::copy(const std::string& path) {
   file.identity_ = identity_of(info);
   const auto size = static_cast<std::size_t>(info.st_size);
   if (size > 0) {
-    // MAP_POPULATE: the pages are about to be written whole; allocating them
-    // in one call is cheaper than a fault per page during the read.
-    void* data =
-        mmap(nullptr, size, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_POPULATE, -1, 0);
+    // No MAP_POPULATE: it would populate the whole capacity, and only the
+    // file's pages are to hold anything.
+    const std::size_t capacity = round_up(size, kCopyCapacityStep);
+    void* data = mmap(nullptr, capacity, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     if (data == MAP_FAILED) {
       const int error = errno;
       ::close(*fd);
-      return io_error("cannot map " + std::to_string(size) + " bytes for " + path + ": " +
+      return io_error("cannot map " + std::to_string(capacity) + " bytes for " + path + ": " +
                       std::strerror(error));
     }
     file.data_ = static_cast<const char*>(data);
     file.size_ = size;
+    file.capacity_ = capacity;
+    populate(static_cast<char*>(data), round_up(size, page_bytes()));
     const Status read = read_whole(*fd, static_cast<char*>(data), size, path);
     if (!read.ok()) {
       ::close(*fd);
@@ -151,24 +178,30 @@ Expected<MappedFile> MappedFile::copy(const std::string& path) {
   return file;
 }
 
-Status MappedFile::read_again(const std::string& path) {
+Status MappedFile::read_again(const std::string& path, bool pages_kept) {
   if (!copy_) return failed_precondition("read_again: " + path + " is mapped, not copied");
   struct stat info {};
   Expected<int> fd = open_for_reading(path, &info);
   if (!fd.ok()) return fd.status();
   const FileIdentity now = identity_of(info);
-  if (now.size != size_) {
+  if (now.size > capacity_) {
     ::close(*fd);
-    return failed_precondition(path + " now has " + std::to_string(now.size) + " bytes, not " +
-                               std::to_string(size_));
+    return failed_precondition(path + " now has " + std::to_string(now.size) + " bytes, more than the " +
+                               std::to_string(capacity_) + " of its copy");
   }
+  char* data = const_cast<char*>(data_);
+  const std::size_t populated = pages_kept ? round_up(size_, page_bytes()) : 0;
+  const std::size_t wanted = round_up(static_cast<std::size_t>(now.size), page_bytes());
+  if (populated > wanted) {
+    // A smaller file than the one these pages held: the rest would stay in
+    // the RSS, beyond what the caller accounts for this file.
+    (void)madvise(data + wanted, populated - wanted, MADV_DONTNEED);
+  } else {
+    populate(data + populated, wanted - populated);
+  }
+  size_ = static_cast<std::size_t>(now.size);
   identity_ = now;
-#ifdef MADV_POPULATE_WRITE
-  // As MAP_POPULATE in copy(): released pages come back in one call, not a
-  // fault each (about a quarter of a 2 MB read); a hint (Linux >= 5.14).
-  (void)madvise(const_cast<char*>(data_), size_, MADV_POPULATE_WRITE);
-#endif
-  const Status read = read_whole(*fd, const_cast<char*>(data_), size_, path);
+  const Status read = read_whole(*fd, data, size_, path);
   ::close(*fd);
   return read;
 }

@@ -11,7 +11,10 @@
 //   this process's own: the file may then be truncated, overwritten or
 //   deleted without affecting them (the subtree tier, whose directory other
 //   processes and users may touch). Unmapping still gives the memory back to
-//   the system, not to the allocator.
+//   the system, not to the allocator. The mapping's length, capacity(), is
+//   the size rounded up to kCopyCapacityStep, so read_again() can later read
+//   a somewhat larger file, or another file, into it; only the pages of
+//   bytes() are ever populated (the rest is address space, not memory).
 //
 // release_pages() drops the pages from the RSS but keeps the mapping, so the
 // next read maps no memory (no write on the process's mapping lock).
@@ -65,14 +68,25 @@ class MappedFile {
   // the file does not exist; IO_ERROR for other failures, among them a file
   // that shrank while being read.
   static Expected<MappedFile> copy(const std::string& path);
-  // A copy() only: reads `path` again into the same memory (no mapping
-  // changes), e.g. after release_pages(). FAILED_PRECONDITION when the file
-  // now has another size (make a new copy instead), NOT_FOUND / IO_ERROR as
+  // copy()'s capacity is its size rounded up to a multiple of this.
+  static constexpr std::size_t kCopyCapacityStep = std::size_t{256} << 10;
+
+  // A copy() only: reads `path` (the same file again, or another one) into
+  // the same memory (no mapping changes), e.g. after release_pages(); bytes()
+  // then has the file's size. FAILED_PRECONDITION when the file is larger
+  // than capacity() (make a new copy instead), NOT_FOUND / IO_ERROR as
   // copy(). Nobody may read the bytes meanwhile. On failure the bytes are
-  // undefined.
-  Status read_again(const std::string& path);
+  // undefined. `pages_kept`: the pages of the bytes() before the call were
+  // not released since they were written (a copy taken out of a
+  // PageReleaseQueue before its batch): they are written over as they are,
+  // and those past the new size released, so the RSS holds the new bytes'
+  // pages only. Otherwise they are taken as released and populated first.
+  Status read_again(const std::string& path, bool pages_kept = false);
 
   std::span<const char> bytes() const { return {data_, size_}; }
+  // The mapping's length (copies: see above; file mappings: their size).
+  std::size_t capacity() const { return capacity_; }
+  bool is_copy() const { return copy_; }
   // Unmaps the pages read so far (MADV_DONTNEED) but keeps the mapping: they
   // leave this process's RSS. A file mapping faults them in again, with the
   // same bytes (the page cache keeps them), when next read; a copy's pages
@@ -86,6 +100,7 @@ class MappedFile {
  private:
   const char* data_ = nullptr;
   std::size_t size_ = 0;
+  std::size_t capacity_ = 0;  // mapped bytes from data_
   FileIdentity identity_;
   bool copy_ = false;
 };

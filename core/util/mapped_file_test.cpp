@@ -6,14 +6,48 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdint>
 #include <future>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "tests/support/test_paths.h"
 
 namespace outcore {
 namespace {
+
+constexpr std::size_t kPage = 4096;
+
+// Pages of [data, data + bytes) present in this process's page tables
+// (/proc/self/pagemap's "present" bit, readable without privileges).
+std::size_t present_pages(const char* data, std::size_t bytes) {
+  const int fd = ::open("/proc/self/pagemap", O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return SIZE_MAX;
+  const auto first = reinterpret_cast<uintptr_t>(data) / kPage;
+  const std::size_t pages = (bytes + kPage - 1) / kPage;
+  std::vector<uint64_t> entries(pages);
+  const ssize_t got = ::pread(fd, entries.data(), pages * sizeof(uint64_t), static_cast<off_t>(first * 8));
+  ::close(fd);
+  if (got != static_cast<ssize_t>(pages * sizeof(uint64_t))) return SIZE_MAX;
+  std::size_t present = 0;
+  for (const uint64_t e : entries) present += (e >> 63) & 1;
+  return present;
+}
+
+std::size_t pages_of(std::size_t bytes) {
+  return (bytes + kPage - 1) / kPage;
+}
+
+std::string pattern(std::size_t size, int seed) {
+  std::string bytes(size, '\0');
+  for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<char>(i * 7 + seed);
+  return bytes;
+}
+
+std::string text_of(const MappedFile& file) {
+  return {file.bytes().data(), file.bytes().size()};
+}
 
 TEST(MappedFile, ReleasedPagesReadTheSameBytesAgain) {
   testing::TempDir dir;
@@ -36,6 +70,74 @@ TEST(MappedFile, ReleasedPagesReadTheSameBytesAgain) {
   EXPECT_TRUE(empty->bytes().empty());
   empty->release_pages();
   EXPECT_EQ(MappedFile::open(path + ".missing").status().code(), StatusCode::kNotFound);
+}
+
+// A copy maps a whole size class but holds (and populates) only its file's
+// pages; another file of up to that capacity is read into the same memory,
+// and pages the smaller file does not fill leave the RSS.
+TEST(MappedFile, ACopyReadsAnotherFileThatFitsItsCapacityIntoTheSameMemory) {
+  if (::sysconf(_SC_PAGESIZE) != static_cast<long>(kPage)) GTEST_SKIP() << "page counts assume 4 KiB pages";
+  testing::TempDir dir;
+  const std::string first = dir.path() + "/first", smaller = dir.path() + "/smaller",
+                    larger = dir.path() + "/larger", too_large = dir.path() + "/too_large";
+  testing::write_text_file(first, pattern(20 * kPage + 5, 1));
+  testing::write_text_file(smaller, pattern(7 * kPage + 100, 2));
+  testing::write_text_file(larger, pattern(30 * kPage, 3));
+  testing::write_text_file(too_large, pattern(MappedFile::kCopyCapacityStep + 1, 4));
+
+  auto copy = MappedFile::copy(first);
+  ASSERT_TRUE(copy.ok()) << copy.status().to_string();
+  EXPECT_TRUE(copy->is_copy());
+  EXPECT_EQ(copy->capacity(), MappedFile::kCopyCapacityStep);
+  EXPECT_EQ(text_of(*copy), pattern(20 * kPage + 5, 1));
+  const char* const data = copy->bytes().data();
+  EXPECT_EQ(present_pages(data, copy->capacity()), 21u) << "only the file's pages are populated";
+
+  // Pages kept (taken from a release queue): written over; the rest released.
+  ASSERT_TRUE(copy->read_again(smaller, /*pages_kept=*/true).ok());
+  EXPECT_EQ(copy->bytes().data(), data) << "the same memory";
+  EXPECT_EQ(text_of(*copy), pattern(7 * kPage + 100, 2));
+  EXPECT_EQ(copy->identity(), *file_identity(smaller));
+  EXPECT_EQ(present_pages(data, copy->capacity()), pages_of(7 * kPage + 100))
+      << "a smaller file's copy holds no pages past it";
+
+  ASSERT_TRUE(copy->read_again(larger, /*pages_kept=*/true).ok());
+  EXPECT_EQ(copy->bytes().data(), data);
+  EXPECT_EQ(text_of(*copy), pattern(30 * kPage, 3));
+  EXPECT_EQ(present_pages(data, copy->capacity()), 30u);
+
+  // Released pages (the kept copy of an evicted brick): populated again.
+  copy->release_pages();
+  EXPECT_EQ(present_pages(data, copy->capacity()), 0u);
+  ASSERT_TRUE(copy->read_again(first).ok());
+  EXPECT_EQ(text_of(*copy), pattern(20 * kPage + 5, 1));
+  EXPECT_EQ(present_pages(data, copy->capacity()), 21u);
+
+  const Status status = copy->read_again(too_large);
+  EXPECT_EQ(status.code(), StatusCode::kFailedPrecondition) << status.to_string();
+  EXPECT_EQ(copy->read_again(dir.path() + "/missing").code(), StatusCode::kNotFound);
+  auto mapped = MappedFile::open(first);
+  ASSERT_TRUE(mapped.ok());
+  EXPECT_FALSE(mapped->is_copy());
+  EXPECT_EQ(mapped->capacity(), mapped->bytes().size());
+  EXPECT_EQ(mapped->read_again(first).code(), StatusCode::kFailedPrecondition)
+      << "file mappings are read only";
+}
+
+// A file emptied since its copy was made reads as empty bytes (the copy keeps
+// its memory), and a later file is read into that memory again.
+TEST(MappedFile, ReadAgainOfAFileThatIsNowEmptyGivesEmptyBytes) {
+  testing::TempDir dir;
+  const std::string path = dir.path() + "/data";
+  testing::write_text_file(path, pattern(3 * kPage, 5));
+  auto copy = MappedFile::copy(path);
+  ASSERT_TRUE(copy.ok());
+  testing::write_text_file(path, "");
+  ASSERT_TRUE(copy->read_again(path, /*pages_kept=*/true).ok());
+  EXPECT_TRUE(copy->bytes().empty());
+  testing::write_text_file(path, pattern(2 * kPage, 6));
+  ASSERT_TRUE(copy->read_again(path).ok());
+  EXPECT_EQ(text_of(*copy), pattern(2 * kPage, 6));
 }
 
 // A FIFO under a subtree file's name (anyone who may write the tier's

@@ -54,6 +54,29 @@ bool PageReleaseQueue::cancel(const MappedFile* file) {
   return true;
 }
 
+std::shared_ptr<const MappedFile> PageReleaseQueue::take(
+    std::size_t bytes, const std::function<bool(const std::shared_ptr<const MappedFile>&)>& may_take) {
+  static const auto page = static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  const auto pages = [](std::size_t n) { return (n + page - 1) / page; };
+  std::lock_guard lock(mutex_);
+  auto best = pending_.end();
+  for (auto it = pending_.begin(); it != pending_.end(); ++it) {
+    const MappedFile& file = **it;
+    // Pages past `bytes` would stay populated under the new file, outside
+    // what its owner accounts for (read_again would release them: a system
+    // call this recycling is meant to save).
+    if (!file.is_copy() || file.capacity() < bytes || pages(file.bytes().size()) > pages(bytes)) continue;
+    if (best != pending_.end() && (*best)->bytes().size() >= file.bytes().size()) continue;
+    if (may_take(*it)) best = it;
+  }
+  if (best == pending_.end()) return nullptr;
+  std::shared_ptr<const MappedFile> file = std::move(*best);
+  pending_.erase(best);
+  pending_bytes_ -= file->bytes().size();
+  ++counters_.taken;
+  return file;
+}
+
 void PageReleaseQueue::flush() {
   std::vector<std::shared_ptr<const MappedFile>> batch;
   {

@@ -14,15 +14,20 @@
 // The cost of batching is bounded: a queued mapping's pages stay mapped (in
 // the process's RSS) until its batch is released, at most max_pending_bytes
 // of mappings at any time. A mapping needed again before its release is
-// taken back out (cancel): its pages were never dropped.
+// taken back out (cancel): its pages were never dropped. A queued copy
+// (MappedFile::copy) may also be taken out to hold another file (take): its
+// populated pages are written over instead of released here and populated
+// again elsewhere.
 //
 // Thread-safety: all member functions may be called concurrently; one mutex
-// guards the queue and is never held across a system call.
+// guards the queue and is never held across a system call (take()'s
+// may_take runs under it).
 #pragma once
 
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -36,6 +41,7 @@ struct PageReleaseCounters {
   uint64_t batches = 0;            // system calls that dropped a batch (process_madvise) ...
   uint64_t single_calls = 0;       // ... or one mapping each (madvise)
   uint64_t cancelled = 0;          // mappings taken back before their release
+  uint64_t taken = 0;              // copies taken out to hold another file (take)
 };
 
 class PageReleaseQueue {
@@ -53,6 +59,16 @@ class PageReleaseQueue {
   // Takes `file` out of the queue if it is there (its pages stay mapped):
   // true when it was.
   bool cancel(const MappedFile* file);
+  // Takes out of the queue (its pages stay mapped) a queued copy that can
+  // hold a file of `bytes` bytes and has no more pages populated than that
+  // file will: capacity() >= bytes, bytes() at most as many pages. Of those,
+  // the one with most pages populated (fewest left to populate), among the
+  // ones `may_take` accepts: it is asked under the queue's lock, must not
+  // call the queue, and vets who else holds the copy (its use_count()). The
+  // caller may then read_again(..., pages_kept = true) into it once nobody
+  // else holds it. nullptr when none qualifies.
+  std::shared_ptr<const MappedFile> take(
+      std::size_t bytes, const std::function<bool(const std::shared_ptr<const MappedFile>&)>& may_take);
   // Releases everything queued now.
   void flush();
 

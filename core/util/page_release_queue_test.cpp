@@ -54,6 +54,16 @@ class PageReleaseQueueTest : public ::testing::Test {
     EXPECT_TRUE(mapped.ok()) << mapped.status().to_string();
     return std::make_shared<const MappedFile>(std::move(mapped).value());
   }
+  // A copy (MappedFile::copy) of a new file of `bytes` bytes.
+  std::shared_ptr<MappedFile> make_copy(int index, std::size_t bytes) {
+    const std::string path = dir_.path() + "/c" + std::to_string(index);
+    std::string data(bytes, '\0');
+    for (std::size_t i = 0; i < data.size(); ++i) data[i] = static_cast<char>(i * 11 + index);
+    testing::write_text_file(path, data);
+    auto copied = MappedFile::copy(path);
+    EXPECT_TRUE(copied.ok()) << copied.status().to_string();
+    return std::make_shared<MappedFile>(std::move(copied).value());
+  }
 
   testing::TempDir dir_;
 };
@@ -150,6 +160,67 @@ TEST_F(PageReleaseQueueTest, ConcurrentReleasesAllHappen) {
   queue.flush();
   EXPECT_EQ(queue.counters().mappings_released, static_cast<uint64_t>(kThreads * kPerThread));
   for (const auto& file : files) EXPECT_EQ(mapped_pages(*file), 0u);
+}
+
+// take(): a queued copy that fits the file and has no more pages than it
+// fills, the one with most pages, comes out with its pages; file mappings,
+// copies too small or with pages to spare, and vetoed ones stay queued.
+TEST_F(PageReleaseQueueTest, TakeReturnsTheFullestQueuedCopyThatFits) {
+  if (::sysconf(_SC_PAGESIZE) != static_cast<long>(kPage)) GTEST_SKIP() << "page counts assume 4 KiB pages";
+  PageReleaseQueue queue(1 << 30, 64);
+  auto small = make_copy(0, 2 * kPage);
+  auto middle = make_copy(1, 5 * kPage - 10);
+  auto big = make_copy(2, 9 * kPage);
+  auto mapping = make_file(3, 5);
+  touch(*mapping);
+  const auto anything = [](const std::shared_ptr<const MappedFile>&) { return true; };
+  const auto nothing = [](const std::shared_ptr<const MappedFile>&) { return false; };
+  for (const auto& file :
+       {std::shared_ptr<const MappedFile>(small), std::shared_ptr<const MappedFile>(middle),
+        std::shared_ptr<const MappedFile>(big), mapping}) {
+    queue.release(file);
+  }
+  const uint64_t queued = queue.pending_bytes();
+
+  EXPECT_EQ(queue.take(5 * kPage, nothing), nullptr) << "vetoed";
+  EXPECT_EQ(queue.take(kPage, anything), nullptr) << "every copy has more pages than one";
+  EXPECT_EQ(queue.take(MappedFile::kCopyCapacityStep + 1, anything), nullptr) << "no copy is that large";
+  const std::shared_ptr<const MappedFile> taken = queue.take(6 * kPage, anything);
+  EXPECT_EQ(taken, middle) << "5 pages of 6: the fullest that fits (the 5-page file mapping is no copy)";
+  EXPECT_EQ(mapped_pages(*taken), 5u) << "taken with its pages";
+  EXPECT_EQ(queue.pending_bytes(), queued - middle->bytes().size());
+  EXPECT_EQ(queue.counters().taken, 1u);
+  EXPECT_FALSE(queue.cancel(middle.get())) << "no longer queued";
+
+  // What the caller then does: read another file into the taken pages.
+  const std::string other = dir_.path() + "/other";
+  const std::string bytes(6 * kPage - 1, 'x');
+  testing::write_text_file(other, bytes);
+  ASSERT_TRUE(middle->read_again(other, /*pages_kept=*/true).ok());
+  EXPECT_EQ(std::string(middle->bytes().data(), middle->bytes().size()), bytes);
+
+  queue.flush();
+  EXPECT_EQ(mapped_pages(*middle), 6u) << "the taken copy is not released with the batch";
+  EXPECT_EQ(mapped_pages(*small), 0u);
+  EXPECT_EQ(mapped_pages(*big), 0u);
+  EXPECT_EQ(queue.counters().mappings_released, 3u);
+}
+
+// The caller's veto sees who else holds a copy: the subtree tier's rule (the
+// queue and the brick's entry, nobody else) never takes a copy that an accel
+// still reads, and takes it once that accel is gone.
+TEST_F(PageReleaseQueueTest, TakeLeavesACopyThatSomeoneElseStillHolds) {
+  PageReleaseQueue queue(1 << 30, 64);
+  auto copy = make_copy(0, 3 * kPage);
+  std::shared_ptr<const MappedFile> reader = copy;  // a live accel's lease
+  queue.release(copy);                              // the copy's entry keeps `copy`
+  const auto only_entry_and_queue = [](const std::shared_ptr<const MappedFile>& file) {
+    return file.use_count() == 2;
+  };
+  EXPECT_EQ(queue.take(3 * kPage, only_entry_and_queue), nullptr);
+  reader.reset();
+  EXPECT_EQ(queue.take(3 * kPage, only_entry_and_queue), copy);
+  EXPECT_EQ(queue.pending_bytes(), 0u);
 }
 
 }  // namespace

@@ -263,7 +263,7 @@ def test_stats_count_the_rays_answered(client, bounds):
     assert after["subtree_write_seconds"] == 0
 
 
-SUBTREE_COUNTS = ("subtree_loads", "subtree_loads_checked", "subtree_loads_kept", "subtree_writes", "subtree_rejects", "subtree_bytes_read",
+SUBTREE_COUNTS = ("subtree_loads", "subtree_loads_checked", "subtree_loads_kept", "subtree_loads_recycled", "subtree_writes", "subtree_rejects", "subtree_bytes_read",
                   "subtree_bytes_written", "subtree_files", "subtree_file_bytes", "subtree_write_failures",
                   "subtree_writes_too_large", "subtree_files_evicted")
 # What the engine counts per request (beyond rays and cache counters), in

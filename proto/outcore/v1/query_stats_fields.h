@@ -42,5 +42,6 @@
   X(subtree_loads_kept)             \
   X(rays_entering_no_brick)         \
   X(brick_visits_without_hit)       \
-  X(bricks_skipped_by_bound)
+  X(bricks_skipped_by_bound)        \
+  X(subtree_loads_recycled)
 // clang-format on

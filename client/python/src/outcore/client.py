@@ -366,7 +366,8 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         rays_traced_ahead and rays_in_brick_set;
         proxy_bytes; and the
         subtree tier's (subtree_dir, "" without one, subtree_loads,
-        subtree_loads_checked, subtree_loads_kept, subtree_writes, subtree_rejects, subtree_bytes_read,
+        subtree_loads_checked, subtree_loads_kept, subtree_loads_recycled, subtree_writes,
+        subtree_rejects, subtree_bytes_read,
         subtree_bytes_written, subtree_load_seconds, subtree_files,
         subtree_file_bytes, subtree_write_failures, subtree_writes_too_large,
         subtree_files_evicted, subtree_write_seconds; all 0 without a tier);
