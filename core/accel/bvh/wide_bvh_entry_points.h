@@ -12,6 +12,7 @@
 
 #include "core/accel/bvh/double_triangle_test.h"
 #include "core/accel/bvh/triangle_test_kind.h"
+#include "core/accel/bvh/wide_bvh_every_hit_kernels.h"
 #include "core/accel/bvh/wide_bvh_kernels.h"
 #include "core/accel/bvh/wide_bvh_packet_kernels.h"
 

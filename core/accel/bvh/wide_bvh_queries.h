@@ -2,7 +2,7 @@
 // wide tree: children nearest first, a box farther than the best point so
 // far skipped (<=, so a tie with a smaller id is still found); distances in
 // float64. Scalar, one point at a time. (Every hit runs on the SIMD kernels:
-// wide_bvh_kernels.h, all_hits_rays.)
+// wide_bvh_every_hit_kernels.h, all_hits_rays.)
 //
 // Thread-safety: pure functions over an immutable view.
 #pragma once
