@@ -117,6 +117,10 @@ def main():
             "plain_warm_builds": plain[1]["brick_builds"],
             "tier_warm_builds": tier[1]["brick_builds"],
             "tier_warm_loads": tier[1]["subtree_loads"],
+            # Loads that mapped nothing: the brick's own copy still populated
+            # (kept) or another evicted brick's queued copy (recycled).
+            "tier_warm_loads_kept": tier[1].get("subtree_loads_kept", 0),
+            "tier_warm_loads_recycled": tier[1].get("subtree_loads_recycled", 0),
             "tier_cold_writes": tier[0]["subtree_writes"],
             "tier_mb_written": tier[0]["subtree_bytes_written"] / 2**20,
             "answers_equal": same_file(plain_out, reference) and same_file(tier_out, reference),
