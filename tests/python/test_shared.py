@@ -227,6 +227,22 @@ def test_shared_counts_and_lists_equal_the_bytes_path(server, refusing_server, b
         np.testing.assert_array_equal(bits(overflowed[key]), bits(listed_by_bytes[key]), err_msg=key)
 
 
+def test_a_shared_list_larger_than_its_room_and_a_message_is_sent_again_with_more_room(small_server, bounds):
+    # --max-message-mb 1: a list whose hits outgrow the segment cannot come
+    # back as bytes either (RESOURCE_EXHAUSTED); the client grows the room
+    # and asks again, and the answer is the bytes path's.
+    rays = make_rays(bounds, 60_000, seed=147)
+    with outcore.SceneClient(small_server.address, timeout=60, shared_memory=False) as client:
+        want = client.list_intersections(rays)
+    assert want["ray_splits"][-1] * 32 > (1 << 20), "the hits must exceed a message for the test to mean anything"
+    with outcore.SceneClient(small_server.address, timeout=60) as client:
+        client._list_hits_per_ray = 0.001
+        got = client.list_intersections(rays)
+        assert client.last_call_shared and client._list_hits_per_ray >= 1.0
+    for key in want:
+        np.testing.assert_array_equal(bits(got[key]), bits(want[key]), err_msg=key)
+
+
 def test_object_the_server_cannot_open_falls_back_to_bytes(server, bounds, monkeypatch):
     rays = make_rays(bounds, N, seed=160)
     want = bytes_answers(server.address, rays)[0]

@@ -27,6 +27,9 @@ _SERVICE = pb.DESCRIPTOR.services_by_name["SceneQuery"].full_name
 _MESSAGE_MARGIN = 16 * 1024
 # Rays per shared-memory ListIntersections call (the server's limit).
 _SHARED_LIST_RAYS = 1 << 20
+# Times a shared list whose hits fit neither its segment nor a message is
+# sent again with 4x the room.
+_SHARED_LIST_GROWTHS = 4
 
 
 # QueryPoints' CLOSEST record (proto "Point queries").
@@ -209,7 +212,6 @@ class Open3dQueries:
         for start in range(0, n, _SHARED_LIST_RAYS):
             part = flat[start:start + _SHARED_LIST_RAYS]
             m = part.shape[0]
-            room = 4 * m + _wire.HIT_DTYPE.itemsize * (int(m * 1.25 * self._list_hits_per_ray) + 64)
 
             def finish_list(reply, segment, offset, m=m):
                 self._check_every_hit_reply(reply, m, name, shared=None)
@@ -219,7 +221,18 @@ class Open3dQueries:
                 return reply, segment.read_answers(np.dtype("<u4"), m, offset), \
                     segment.read_answers(_wire.HIT_DTYPE, reply.hit_count, offset + 4 * m)
 
-            done = self._shared_call(call, name, part, room, finish_list, answers_room=True, strict=strict)
+            for attempt in range(_SHARED_LIST_GROWTHS + 1):
+                room = 4 * m + _wire.HIT_DTYPE.itemsize * (int(m * 1.25 * self._list_hits_per_ray) + 64)
+                try:
+                    done = self._shared_call(call, name, part, room, finish_list, answers_room=True,
+                                             strict=strict)
+                    break
+                except OutcoreError as e:
+                    # More hits than the room and than a message holds: a
+                    # roomier segment (the part is traced again).
+                    if e.code != "RESOURCE_EXHAUSTED" or attempt == _SHARED_LIST_GROWTHS:
+                        raise
+                    self._list_hits_per_ray = 4 * max(1.0, self._list_hits_per_ray)
             if done is None:
                 return None
             reply, part_counts, part_hits = done
