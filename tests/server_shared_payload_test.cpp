@@ -558,6 +558,23 @@ TEST_F(ServerSharedPayload, CountsThroughSharedMemoryEqualTheEngines) {
     const grpc::Status status = stub_->CountIntersections(&context, wrong_token, &response);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::PERMISSION_DENIED) << status.error_message();
   }
+  {  // The C++ client's counts of a large batch take the same path.
+    auto client = client::SceneClient::connect(server_->address());
+    ASSERT_TRUE(client.ok()) << client.status().to_string();
+    const std::vector<Ray> many = rays(client::kSharedMinRays + 100, 32);
+    std::vector<uint32_t> want(many.size(), 0), got(many.size(), 0), by_bytes(many.size(), 0);
+    ASSERT_TRUE(engine_->all_hits(many, want, nullptr, QueryOptions{}).ok());
+    client::CallStats stats;
+    ASSERT_TRUE((*client)->count_intersections(many, got, {}, &stats).ok());
+    EXPECT_TRUE(stats.shared);
+    EXPECT_EQ(got, want);
+    client::CallOptions chunked;
+    chunked.chunk_rays = 5000;  // chunked calls go as bytes
+    client::CallStats bytes_stats;
+    ASSERT_TRUE((*client)->count_intersections(many, by_bytes, chunked, &bytes_stats).ok());
+    EXPECT_FALSE(bytes_stats.shared);
+    EXPECT_EQ(by_bytes, want);
+  }
   // ListIntersections: its room must be named; counts then hits land in the
   // object when they fit, in the reply's fields when they do not.
   std::vector<uint32_t> counts(n, 0);

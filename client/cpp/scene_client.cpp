@@ -95,6 +95,17 @@ const char* method_name(const v1::IntersectResponse*) {
 const char* method_name(const v1::OccludedResponse*) {
   return "Occluded";
 }
+// Counts go through shared memory too (their 4-byte answers are the payload).
+grpc::Status call_unary(v1::SceneQuery::Stub& stub, grpc::ClientContext* context,
+                        const v1::QueryRequest& request, v1::CountResponse* response) {
+  return stub.CountIntersections(context, request, response);
+}
+const std::string& payload(const v1::CountResponse& response) {
+  return response.counts();
+}
+const char* method_name(const v1::CountResponse*) {
+  return "CountIntersections";
+}
 
 void fill_request(std::span<const Ray> rays, uint64_t sequence, const CallOptions& options,
                   v1::QueryRequest& request) {
@@ -275,6 +286,16 @@ Status SceneClient::every_hit_chunk(std::span<const Ray> rays, bool listing, std
 Status SceneClient::count_intersections(std::span<const Ray> rays, std::span<uint32_t> counts,
                                         const CallOptions& options, CallStats* stats) {
   if (counts.size() != rays.size()) return invalid_argument("counts and rays differ in length");
+  // Same host: as intersect(), when the server takes every-hit calls so
+  // (SceneInfo.shared_every_hit_payloads; older servers refuse them).
+  if (options.chunk_rays == 0 && rays.size() >= kSharedMinRays && scene_.shared_every_hit_payloads() &&
+      use_shared_.load(std::memory_order_relaxed)) {
+    bool send_bytes = false;
+    const std::span<uint8_t> out(reinterpret_cast<uint8_t*>(counts.data()), counts.size_bytes());
+    const Status shared =
+        run_shared<v1::CountResponse>(rays, out, sizeof(uint32_t), options, stats, &send_bytes);
+    if (!send_bytes) return shared;
+  }
   std::vector<uint32_t> all;
   for (std::size_t from = 0; from < rays.size(); from += max_chunk_rays_) {
     const auto chunk = rays.subspan(from, std::min<std::size_t>(max_chunk_rays_, rays.size() - from));

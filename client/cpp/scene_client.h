@@ -108,7 +108,8 @@ class SceneClient {
   // chunks of max_chunk_rays(); a list's chunk is cut smaller when its hits
   // would not fit a message): counts[i] hits on ray i, and with `hits` every
   // hit, ray by ray, each ray's by t then ids. counts.size() must equal
-  // rays.size().
+  // rays.size(). Counts of a large batch go through shared memory as
+  // intersect()'s do when the server takes them; lists always as bytes.
   Status count_intersections(std::span<const Ray> rays, std::span<uint32_t> counts,
                              const CallOptions& options = {}, CallStats* stats = nullptr);
   Status list_intersections(std::span<const Ray> rays, std::span<uint32_t> counts, std::vector<Hit>& hits,
