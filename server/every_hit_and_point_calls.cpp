@@ -175,8 +175,7 @@ Status SceneQueryService::pack_list_reply(std::span<const uint32_t> counts,
   response->set_hit_count(records.size());
   std::string* hits = response->mutable_hits();
   hits->resize(records.size() * sizeof(Hit));
-  for (std::size_t k = 0; k < records.size(); ++k)
-    std::memcpy(hits->data() + k * sizeof(Hit), &records[k].hit, sizeof(Hit));
+  pack_hit_records(records, hits->data());
   return Status::Ok();
 }
 

@@ -149,9 +149,9 @@ Status SceneQueryService::trace(std::span<const Ray> rays, uint8_t* out, const v
     // Counts only (a shared CountIntersections): `out` is a call buffer's
     // start, allocated with new, so aligned for uint32_t.
     assert(reinterpret_cast<uintptr_t>(out) % alignof(uint32_t) == 0);
-    std::span<uint32_t> counts(reinterpret_cast<uint32_t*>(out), n);
-    std::fill(counts.begin(), counts.end(), 0u);
-    status = engine_.all_hits(rays, counts, nullptr, query_options, stats);
+    // The engine resets every ray's count, as it does every hit record.
+    status = engine_.all_hits(rays, std::span<uint32_t>(reinterpret_cast<uint32_t*>(out), n), nullptr,
+                              query_options, stats);
   }
   if (status.ok()) counters_.add_answered(*stats);
   return status;

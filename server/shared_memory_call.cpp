@@ -138,8 +138,7 @@ grpc::Status SceneQueryService::answer_shared_list(grpc::ServerContext* context,
     std::vector<uint8_t>& packed = buffers->answers;
     packed.resize(n * sizeof(uint32_t) + hits_bytes);
     if (n != 0) std::memcpy(packed.data(), counts.data(), n * sizeof(uint32_t));
-    for (std::size_t k = 0; k < records.size(); ++k)
-      std::memcpy(packed.data() + n * sizeof(uint32_t) + k * sizeof(Hit), &records[k].hit, sizeof(Hit));
+    pack_hit_records(records, reinterpret_cast<char*>(packed.data()) + n * sizeof(uint32_t));
     OUTCORE_RETURN_IF_ERROR(
         write_shared_answers(*object, request.shared(), 0, packed).with_context("request"));
     response->set_answers_in_shared(true);

@@ -9,8 +9,11 @@
 #pragma once
 
 #include <cstdint>
+#include <cstring>
+#include <span>
 #include <string>
 
+#include "core/accel/brick_queries.h"
 #include "core/query/query_stats.h"
 #include "core/ray/query_types.h"
 #include "outcore/v1/scene_query.pb.h"
@@ -60,6 +63,13 @@ uint64_t reply_bytes_per_ray(const v1::QueryRequest& request) {
   } else {
     return KindTraits<kKind>::kReplyBytesPerRay;
   }
+}
+
+// A list's hits in the wire's layout: each record's 32-byte hit, in order,
+// at `out` (room for records.size() of them).
+inline void pack_hit_records(std::span<const RayHitRecord> records, char* out) {
+  for (std::size_t k = 0; k < records.size(); ++k)
+    std::memcpy(out + k * sizeof(Hit), &records[k].hit, sizeof(Hit));
 }
 
 // "request", or "chunk N" of a stream: how errors name a batch.

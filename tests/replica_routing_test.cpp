@@ -88,6 +88,13 @@ class ReplicaRouterTest : public ::testing::Test {
     }
     return servers;
   }
+  // The rays' answers from the one server at `address`: the reference.
+  static void one_server_hits(const std::string& address, std::vector<Hit>& hits) {
+    hits.assign(rays_.size(), Hit{});
+    auto one = SceneClient::connect(address);
+    ASSERT_TRUE(one.ok()) << one.status().message();
+    ASSERT_TRUE((*one)->intersect(rays_, hits).ok());
+  }
   static testing::PackedScene* scene_;
   static std::vector<Ray> rays_;
 };
@@ -105,12 +112,8 @@ TEST_F(ReplicaRouterTest, RoutedAnswersAreOneServersBitwiseAndAKilledReplicaCost
   auto servers = start(3);
   ASSERT_EQ(servers.size(), 3u);
   for (const auto& s : servers) ASSERT_NE(s, nullptr);
-  std::vector<Hit> reference(rays_.size());
-  {
-    auto one = SceneClient::connect(servers[0]->address());
-    ASSERT_TRUE(one.ok()) << one.status().message();
-    ASSERT_TRUE((*one)->intersect(rays_, reference).ok());
-  }
+  std::vector<Hit> reference;
+  ASSERT_NO_FATAL_FAILURE(one_server_hits(servers[0]->address(), reference));
   std::vector<std::string> addresses;
   for (const auto& s : servers) addresses.push_back(s->address());
   auto router = ReplicaRouter::connect(addresses);
@@ -150,12 +153,8 @@ TEST_F(ReplicaRouterTest, AResolvedNameIsResolvedAgainAndItsReplicasFollow) {
   auto servers = start(2);
   ASSERT_EQ(servers.size(), 2u);
   for (const auto& s : servers) ASSERT_NE(s, nullptr);
-  std::vector<Hit> reference(rays_.size());
-  {
-    auto one = SceneClient::connect(servers[0]->address());
-    ASSERT_TRUE(one.ok()) << one.status().message();
-    ASSERT_TRUE((*one)->intersect(rays_, reference).ok());
-  }
+  std::vector<Hit> reference;
+  ASSERT_NO_FATAL_FAILURE(one_server_hits(servers[0]->address(), reference));
   auto resolved =
       std::make_shared<Expected<std::vector<std::string>>>(std::vector<std::string>{servers[0]->address()});
   auto router =

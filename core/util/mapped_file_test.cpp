@@ -12,6 +12,7 @@
 #include <thread>
 #include <vector>
 
+#include "tests/support/present_pages.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -19,21 +20,7 @@ namespace {
 
 constexpr std::size_t kPage = 4096;
 
-// Pages of [data, data + bytes) present in this process's page tables
-// (/proc/self/pagemap's "present" bit, readable without privileges).
-std::size_t present_pages(const char* data, std::size_t bytes) {
-  const int fd = ::open("/proc/self/pagemap", O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return SIZE_MAX;
-  const auto first = reinterpret_cast<uintptr_t>(data) / kPage;
-  const std::size_t pages = (bytes + kPage - 1) / kPage;
-  std::vector<uint64_t> entries(pages);
-  const ssize_t got = ::pread(fd, entries.data(), pages * sizeof(uint64_t), static_cast<off_t>(first * 8));
-  ::close(fd);
-  if (got != static_cast<ssize_t>(pages * sizeof(uint64_t))) return SIZE_MAX;
-  std::size_t present = 0;
-  for (const uint64_t e : entries) present += (e >> 63) & 1;
-  return present;
-}
+using testing::present_pages;
 
 std::size_t pages_of(std::size_t bytes) {
   return (bytes + kPage - 1) / kPage;

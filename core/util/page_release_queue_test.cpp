@@ -11,6 +11,7 @@
 #include <thread>
 #include <vector>
 
+#include "tests/support/present_pages.h"
 #include "tests/support/test_paths.h"
 
 namespace outcore {
@@ -18,20 +19,9 @@ namespace {
 
 constexpr std::size_t kPage = 4096;
 
-// Pages of `file` present in this process's page tables (/proc/self/pagemap's
-// "present" bit, readable without privileges).
+// Pages of `file` present in this process's page tables.
 std::size_t mapped_pages(const MappedFile& file) {
-  const int fd = ::open("/proc/self/pagemap", O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return SIZE_MAX;
-  const auto first = reinterpret_cast<uintptr_t>(file.bytes().data()) / kPage;
-  const std::size_t pages = (file.bytes().size() + kPage - 1) / kPage;
-  std::vector<uint64_t> entries(pages);
-  const ssize_t got = ::pread(fd, entries.data(), pages * sizeof(uint64_t), static_cast<off_t>(first * 8));
-  ::close(fd);
-  if (got != static_cast<ssize_t>(pages * sizeof(uint64_t))) return SIZE_MAX;
-  std::size_t present = 0;
-  for (const uint64_t e : entries) present += (e >> 63) & 1;
-  return present;
+  return testing::present_pages(file.bytes().data(), file.bytes().size());
 }
 
 // Reads every page (maps them all) and returns the bytes' sum.

@@ -174,13 +174,10 @@ class Open3dQueries:
                     chunk = max(1, chunk // 4)
                     continue
                 raise from_rpc_error(e, name) from None
-            if reply.ray_count != part.shape[0] or len(reply.counts) != 4 * part.shape[0]:
-                raise OutcoreError("DATA_LOSS", f"reply for {reply.ray_count} rays, sent {part.shape[0]}", name)
+            self._check_every_hit_reply(reply, part.shape[0], name, shared=False, listing=listing)
             counts.append(np.frombuffer(reply.counts, dtype="<u4"))
             if listing:
-                if len(reply.hits) != reply.hit_count * _wire.HIT_DTYPE.itemsize or \
-                        reply.hit_count != int(counts[-1].sum()):
-                    raise OutcoreError("DATA_LOSS", "list reply's hits do not match its counts", name)
+                self._check_hit_count(reply, counts[-1], name)
                 hits.append(np.frombuffer(reply.hits, dtype=_wire.HIT_DTYPE))
             add_fields(stats, reply.stats)
             start += part.shape[0]
@@ -198,7 +195,7 @@ class Open3dQueries:
         n = flat.shape[0]
         if not listing:
             def finish_counts(reply, segment, offset):  # a CountResponse (the call deserialises it)
-                self._check_every_hit_reply(reply, n, name, shared=True)
+                self._check_every_hit_reply(reply, n, name, shared=True, listing=False)
                 return reply, segment.read_answers(np.dtype("<u4"), n, offset)
 
             done = self._shared_call(call, name, flat, 4 * n, finish_counts, strict=strict)
@@ -214,7 +211,7 @@ class Open3dQueries:
             m = part.shape[0]
 
             def finish_list(reply, segment, offset, m=m):
-                self._check_every_hit_reply(reply, m, name, shared=None)
+                self._check_every_hit_reply(reply, m, name, shared=None, listing=True)
                 if not reply.answers_in_shared:
                     return reply, np.frombuffer(reply.counts, dtype="<u4"), \
                         np.frombuffer(reply.hits, dtype=_wire.HIT_DTYPE)
@@ -236,8 +233,7 @@ class Open3dQueries:
             if done is None:
                 return None
             reply, part_counts, part_hits = done
-            if reply.hit_count != int(part_counts.sum(dtype=np.uint64)):
-                raise OutcoreError("DATA_LOSS", "list reply's hits do not match its counts", name)
+            self._check_hit_count(reply, part_counts, name)
             self._list_hits_per_ray = max(1.0, reply.hit_count / max(1, m))
             counts.append(part_counts)
             hits.append(part_hits)
@@ -247,21 +243,31 @@ class Open3dQueries:
         return np.concatenate(counts), np.concatenate(hits)
 
     @staticmethod
-    def _check_every_hit_reply(reply, n: int, name: str, shared) -> None:
-        """DATA_LOSS unless `reply` answers n rays, in shared memory (shared
-        True), in its bytes (False) or either (None)."""
+    def _check_every_hit_reply(reply, n: int, name: str, shared, listing: bool) -> None:
+        """DATA_LOSS unless `reply` (a CountResponse or ListResponse) answers
+        n rays, in shared memory (shared True), in its bytes (False) or
+        either (None), with a list's hit bytes where its answers are."""
         in_shared = reply.answers_in_shared
+        hit_bytes = len(reply.hits) if listing else 0
         problem = None
         if reply.ray_count != n:
             problem = f"ray_count {reply.ray_count} for {n} rays"
         elif shared is not None and in_shared != shared:
             problem = f"answers_in_shared {in_shared}, expected {shared}"
-        elif in_shared and reply.counts:
-            problem = f"{len(reply.counts)} count bytes beside answers in shared memory"
+        elif in_shared and (reply.counts or hit_bytes):
+            problem = f"{len(reply.counts) + hit_bytes} payload bytes beside answers in shared memory"
         elif not in_shared and len(reply.counts) != 4 * n:
             problem = f"{len(reply.counts)} count bytes for {n} rays"
+        elif not in_shared and listing and hit_bytes != reply.hit_count * _wire.HIT_DTYPE.itemsize:
+            problem = f"{hit_bytes} hit bytes for {reply.hit_count} hits"
         if problem:
             raise OutcoreError("DATA_LOSS", f"malformed reply: {problem}", name)
+
+    @staticmethod
+    def _check_hit_count(reply, counts: np.ndarray, name: str) -> None:
+        """DATA_LOSS unless a list reply's hit_count is the sum of its counts."""
+        if reply.hit_count != int(counts.sum(dtype=np.uint64)):
+            raise OutcoreError("DATA_LOSS", "list reply's hits do not match its counts", name)
 
     def _points(self, query_points, kind, dtype: np.dtype, strict: bool) -> np.ndarray:
         """Answers (..., 3) points with one record of `dtype` each, shaped
