@@ -17,7 +17,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 using testing::SubprocessResult;
@@ -91,5 +91,5 @@ TEST_F(CacheBudgetCli, ServeRefusesToStartUnderABudgetBelowTheLargestBrick) {
   EXPECT_TRUE(contains(error, "smallest workable budget is")) << error;
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

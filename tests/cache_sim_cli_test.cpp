@@ -21,7 +21,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 using testing::SubprocessResult;
@@ -220,5 +220,5 @@ TEST_F(CacheSimCliTest, HugeByteCountsAreErrorsNamingTheLineAndValue) {
   EXPECT_EQ(json_number_for(r.stdout_text, "lru", "budget_bytes", 1), 2305843009213693952.0) << r.stdout_text;
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

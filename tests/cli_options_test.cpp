@@ -17,7 +17,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::contains;
@@ -87,5 +87,5 @@ TEST(CliOptions, MeaninglessNumbersAreRejectedNamingTheOptionAndValue) {
   EXPECT_TRUE(fs::exists(out));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

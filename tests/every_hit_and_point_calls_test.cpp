@@ -20,7 +20,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 using testing::ServerProcess;
@@ -163,5 +163,5 @@ TEST_F(EveryHitAndPointCalls, BadRequestsNameWhatIsWrong) {
   EXPECT_TRUE(contains(bad_ray.message(), "ray 3")) << bad_ray.message();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -23,7 +23,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::count_of;
 using testing::json_uint;
@@ -170,5 +170,5 @@ TEST_F(OutOfCoreCli, TierLoadedBvhBricksAtAQuarterBudgetAnswerTheSameWithinBudge
   expect_bounded({"--brick-accel", "bvh"}, true);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

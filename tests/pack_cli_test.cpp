@@ -28,7 +28,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::contains;
@@ -688,5 +688,5 @@ TEST(PackCliMemory, IndexedObjWithMoreVertexBytesThanMemMbStaysWithinTheBoundAnd
   EXPECT_TRUE(a == b) << "triangles stored differently by the out-of-core and in-memory reads";
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

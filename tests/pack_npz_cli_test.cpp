@@ -19,7 +19,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::contains;
@@ -127,5 +127,5 @@ TEST(PackCliNpz, AMeshLargerThanHalfOfMemMbIsRefusedNamingTheFileAndTheOption) {
   EXPECT_TRUE(fs::is_empty(out.path()));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

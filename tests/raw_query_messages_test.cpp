@@ -12,7 +12,7 @@
 #include <vector>
 
 namespace outcore::client {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 std::string bytes_of(const grpc::ByteBuffer& buffer) {
   std::vector<grpc::Slice> slices;
@@ -137,5 +137,5 @@ TEST(RawQueryMessages, TruncatedOrBrokenRepliesAreDataLoss) {
   EXPECT_NE(group.message().find("wire type 3"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore::client

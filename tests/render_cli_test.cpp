@@ -29,7 +29,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::contains;
@@ -272,5 +272,5 @@ TEST_F(RenderCli, ReplacesAnExistingPictureWholeAndTakesNegativeNumbers) {
   EXPECT_EQ(files, 1u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

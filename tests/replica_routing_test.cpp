@@ -22,7 +22,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore::client {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 std::vector<Ray> vector_rays() {
   const float rows[6][6] = {{0.3f, 5, 0.3f, 0, -1, 0},      {0.3f, -5, 0.3f, 0, 1, 0},
@@ -192,5 +192,5 @@ TEST_F(ReplicaRouterTest, AResolvedNameIsResolvedAgainAndItsReplicasFollow) {
   EXPECT_NE(wrong.status().message().find("not a dns: target"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore::client

@@ -40,7 +40,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 using testing::json_uint;
@@ -1008,5 +1008,5 @@ TEST(ServerStoreReplaced, AServerWhoseStoreWasRepackedSaysSoAndKeepsServingTheSc
   EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -25,7 +25,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 using testing::ServerProcess;
@@ -323,5 +323,5 @@ TEST_F(ServerE2e, PortsOutsideTheirRangeOrNotNumbersAreErrorsNamingTheValue) {
   EXPECT_FALSE(std::ifstream(out).good()) << "a failed query wrote its output";
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

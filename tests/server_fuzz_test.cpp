@@ -27,7 +27,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 
@@ -426,5 +426,5 @@ TEST_F(ServerFuzz, BytesThatAreNoQueryRequestAreInvalidArgumentNamingTheMessage)
   EXPECT_TRUE(status.ok()) << status.error_message();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -33,7 +33,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::ServerProcess;
 
@@ -620,5 +620,5 @@ TEST_F(ServerSharedPayload, CountsThroughSharedMemoryEqualTheEngines) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -20,7 +20,7 @@
 #include "server/throughput_history.h"
 
 namespace outcore::server {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // name{labels} -> value for every sample line; fails the test on a line that
 // is not a HELP/TYPE comment or a well-formed sample.
@@ -174,5 +174,5 @@ TEST(ListenExposure, PlaintextOnlyOnLoopbackUnlessAskedFor) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore::server

@@ -10,7 +10,7 @@
 #include <vector>
 
 namespace outcore::server {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 std::string header_token(SharedMemoryObject& object) {
   std::string token(SharedMemoryObject::kTokenBytes, '\0');
@@ -102,5 +102,5 @@ TEST(SharedMappingCache, KeepsAtMostItsBoundAndDropsUnlinkedObjects) {
   EXPECT_EQ(none.mapped(), 2u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore::server

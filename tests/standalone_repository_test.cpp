@@ -12,7 +12,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 
@@ -72,5 +72,5 @@ TEST(StandaloneRepository, CarriesItsTestModelsWithTheirAttribution) {
   EXPECT_TRUE(fs::is_regular_file(fs::path(OUTCORE_SOURCE_DIR) / "LICENSE"));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

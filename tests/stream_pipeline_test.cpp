@@ -13,7 +13,7 @@
 #include <vector>
 
 namespace outcore::server {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using Response = v1::IntersectResponse;
 
@@ -143,5 +143,5 @@ TEST(StreamPipeline, AFailedWriteStopsThePipelineAndTheHandlersPushes) {
   EXPECT_TRUE(pipeline.write_failed());
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore::server

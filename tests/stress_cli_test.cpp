@@ -19,7 +19,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 using testing::SubprocessResult;
@@ -168,5 +168,5 @@ TEST(StressCli, NamesWhereItLookedWhenTheModelsAreMissing) {
   EXPECT_TRUE(contains(r.stderr_text, "--no-models")) << r.stderr_text;
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

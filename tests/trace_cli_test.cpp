@@ -31,7 +31,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::contains;
@@ -738,5 +738,5 @@ TEST_F(TraceCli, SubtreeDirIsRejectedWithoutBvhNamingTheOption) {
   EXPECT_TRUE(contains(serve.stderr_text, "--subtree-dir needs --brick-accel bvh")) << serve.describe();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

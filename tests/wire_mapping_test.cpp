@@ -14,7 +14,7 @@
 #include "server/wire_mapping.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Every figure a value of its own (uint64: 1, 2, ...; doubles: 0.5, 1.5, ...).
 QueryStats numbered() {
@@ -105,5 +105,5 @@ TEST(WireMapping, TheServerSumsItsFiguresAndReportsThemInServerStats) {
   EXPECT_EQ(out.cache_hits(), 0u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

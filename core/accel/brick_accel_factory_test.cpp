@@ -12,7 +12,7 @@
 #include "core/accel/embree_device.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 bool contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
@@ -169,5 +169,5 @@ TEST(BrickAccelFactory, BuildsConcurrentlyThroughTheInterface) {
   EXPECT_EQ(failed.status().code(), StatusCode::kInvalidArgument);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

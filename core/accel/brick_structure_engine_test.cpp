@@ -19,7 +19,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using Packed = testing::PackedScene;
 
@@ -190,5 +190,5 @@ TEST(BrickStructureEngine, TinyBudgetAnswersLikeAnUnlimitedOneWithinItsReservati
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

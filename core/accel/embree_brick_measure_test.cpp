@@ -22,7 +22,7 @@
 #include "core/accel/embree_device.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using namespace accel_test;
 
@@ -452,5 +452,5 @@ TEST(EmbreeBrickMeasure, DISABLED_DefaultChoice) {
                 build[c] + 1.0 / best[c]);
   }
 }
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -9,7 +9,7 @@
 #include "core/accel/accel_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using namespace accel_test;
 
@@ -174,5 +174,5 @@ TEST(EmbreeBrickSet, BricksWithoutTrianglesGiveASetThatAnswersNothing) {
   EXPECT_EQ(occluded, 0);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

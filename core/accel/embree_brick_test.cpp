@@ -20,7 +20,7 @@
 #include "core/accel/embree_device.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using namespace accel_test;
 
@@ -605,5 +605,5 @@ TEST(EmbreeBrick, MemoryStaysWithinReserve) {
   EXPECT_EQ((*device)->live_bytes(), live_before);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

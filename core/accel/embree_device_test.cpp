@@ -12,7 +12,7 @@
 #include "core/accel/embree_brick.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 bool contains(const std::string& text, const std::string& part) {
   return text.find(part) != std::string::npos;
@@ -92,5 +92,5 @@ TEST(EmbreeDevice, ConcurrentBuildsAreEachMeasuredAsWhenBuiltAlone) {
   EXPECT_EQ((*device)->unattributed_bytes(), unattributed_before);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -9,7 +9,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 std::vector<AccessRecord> records(uint64_t first, uint64_t count) {
   std::vector<AccessRecord> out;
@@ -128,5 +128,5 @@ TEST(AccessTraceTest, MalformedFilesAreErrorsNamingFileAndLine) {
   EXPECT_EQ(missing.status().code(), StatusCode::kNotFound);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -7,7 +7,7 @@
 #include "core/cache/policy_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing_policy::any_brick;
 using testing_policy::drain;
@@ -98,5 +98,5 @@ TEST(ArcPolicyTest, SkipsPinnedBricksAndFallsBackToTheOtherList) {
   EXPECT_EQ(drain(arc), (V{0, 1, 2}));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -13,7 +13,7 @@
 #include "core/cache/eviction_policy.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 AccessTrace trace_of(const std::vector<uint32_t>& bricks, const std::vector<uint64_t>& bytes_of = {}) {
   AccessTrace trace;
@@ -127,5 +127,5 @@ TEST(BeladyTest, SizeWeightedRuleHelpsWhenSizesDiffer) {
   EXPECT_EQ(sized->detail, "size-weighted");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

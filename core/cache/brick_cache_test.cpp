@@ -27,7 +27,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -577,11 +577,11 @@ TEST_F(BrickCacheTest, AReservationOverrunIsCountedNotFatal) {
   EXPECT_EQ(c.resident_bytes, 88u * triangles(0));  // the true bytes, honestly
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // A builder that records the demand of each build and wants a rebuild once a
 // brick's expected rays reach a threshold (a stand-in for auto's choice).
@@ -658,5 +658,5 @@ TEST_F(BrickCacheTest, RaysAreSummedPerBrickAndABrickWorthRebuildingIsRebuiltUnl
   EXPECT_EQ(demands->back().rays_expected, 8u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

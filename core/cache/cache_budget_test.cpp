@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 Manifest manifest_with_bricks(std::initializer_list<uint32_t> triangle_counts) {
   Manifest manifest;
@@ -46,5 +46,5 @@ TEST(CacheBudget, ASceneWithoutBricksNeedsNothing) {
   EXPECT_TRUE(check_cache_budget(Manifest{}, **builder, 1).ok());
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -21,7 +21,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 AccessTrace trace_of(const std::vector<uint32_t>& bricks, uint64_t bytes = 100, uint64_t reserved = 0) {
   AccessTrace trace;
@@ -216,5 +216,5 @@ TEST_F(LiveReplayTest, ReplayWithTheLivePolicyAndBudgetMatchesTheLiveCache) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

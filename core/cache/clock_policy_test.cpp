@@ -8,7 +8,7 @@
 #include "core/cache/policy_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing_policy::any_brick;
 using testing_policy::drain;
@@ -61,5 +61,5 @@ TEST(ClockPolicyTest, PinnedBricksArePassedOverUntouched) {
   EXPECT_EQ(clock.choose_victim(unpinned), 0u);  // after one pass clearing its bit
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -7,7 +7,7 @@
 #include "core/cache/policy_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing_policy::any_brick;
 using testing_policy::drain;
@@ -58,5 +58,5 @@ TEST(GdsfPolicyTest, SkipsPinnedBricks) {
   EXPECT_EQ(gdsf.choose_victim(any_brick), 0u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

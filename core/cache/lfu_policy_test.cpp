@@ -7,7 +7,7 @@
 #include "core/cache/policy_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing_policy::any_brick;
 using testing_policy::drain;
@@ -74,5 +74,5 @@ TEST(LfuPolicyTest, SkipsPinnedBricks) {
   EXPECT_FALSE(lfu.choose_victim([](uint32_t) { return false; }).has_value());
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

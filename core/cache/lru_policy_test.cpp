@@ -10,7 +10,7 @@
 #include "core/cache/eviction_policy.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 const auto kAny = [](uint32_t) { return true; };
 
@@ -157,5 +157,5 @@ TEST(EvictionPolicyFactoryTest, UnknownNameIsNotFoundListingKnownOnes) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -7,7 +7,7 @@
 #include "core/cache/policy_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing_policy::any_brick;
 using testing_policy::drain;
@@ -85,5 +85,5 @@ TEST(S3FifoPolicyTest, SkipsPinnedBricks) {
   EXPECT_EQ(drain(s3), (V{0, 1, 2}));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -10,7 +10,7 @@
 #include "core/cache/policy_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing_policy::drain;
 using testing_policy::evict_one;
@@ -96,5 +96,5 @@ TEST(SchedulePolicyTest, WithTheWholeFutureAsHintItMatchesBeladyOnUnitSizes) {
   EXPECT_EQ(builds(lru, false), 6);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

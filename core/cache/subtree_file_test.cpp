@@ -18,7 +18,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 
@@ -141,5 +141,5 @@ TEST_F(SubtreeFileTest, WritingOverAnExistingFileFails) {
   EXPECT_FALSE(write_subtree_file(path_, key_, serializer_, *accel_, nullptr).ok());
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

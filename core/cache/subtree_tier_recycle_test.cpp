@@ -23,7 +23,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 
@@ -279,5 +279,5 @@ TEST_F(SubtreeTierRecycleTest, ConcurrentLoadsNeverRecycleACopyALiveAccelReads) 
   EXPECT_GT(c.loads_recycled, 0u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

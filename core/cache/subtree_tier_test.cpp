@@ -35,7 +35,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 
@@ -672,5 +672,5 @@ TEST(SubtreeTierEngine, EmbreeWithASubtreeDirectoryIsAnError) {
   EXPECT_NE(engine.status().message().find("embree"), std::string::npos) << engine.status().message();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -13,7 +13,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 TEST(Calibration, TheFitRecoversKnownCoefficients) {
   const std::array<double, kFeatureCount> build = {-15, 0.1, -0.2, 0.3, 0.05};
@@ -133,5 +133,5 @@ TEST(Calibration, StoreSamplesSpreadOverTheBrickSizes) {
   EXPECT_EQ(all->size(), (*store)->brick_count());
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

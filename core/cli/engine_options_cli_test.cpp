@@ -5,7 +5,7 @@
 #include <string>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 Status apply(const EngineCliOptions& cli, EngineOptions* out = nullptr) {
   EngineOptions options;
@@ -61,13 +61,15 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
   cases[4].message = "--accel-opt 'a' given twice";
   cases[5].cli.brick_accel = "embree";
   cases[5].cli.triangle_test = "mt";
-  cases[5].message = "--triangle-test needs --brick-accel bvh|kdtree|bsp|grid|hgrid|octree|quadtree|auto (got 'embree')";
+  cases[5].message =
+      "--triangle-test needs --brick-accel bvh|kdtree|bsp|grid|hgrid|octree|quadtree|auto (got 'embree')";
   cases[6].cli.reference = true;
   cases[6].cli.brick_accel = "embree";
   cases[6].message = "--reference chooses the brick structure itself";
   cases[7].cli.brick_accel = "embree";
   cases[7].cli.subtree.dir = "/tmp/x";
-  cases[7].message = "--subtree-dir needs --brick-accel bvh|kdtree|bsp|grid|hgrid|octree|quadtree|auto (got 'embree'";
+  cases[7].message =
+      "--subtree-dir needs --brick-accel bvh|kdtree|bsp|grid|hgrid|octree|quadtree|auto (got 'embree'";
   cases[8].cli.brick_bounds = "kdop";
   cases[8].message = "--brick-bounds must be aabb, sphere or obb, got 'kdop'";
   for (const Case& c : cases) {
@@ -77,5 +79,5 @@ TEST(EngineOptionsCli, ABadOptionIsNamedInTheError) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

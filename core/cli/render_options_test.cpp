@@ -8,7 +8,7 @@
 #include <string>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 TEST(RenderOptionsTest, ParsesVectors) {
   auto v = parse_vec3_option("--eye", "0,-2.5,1e3");
@@ -54,5 +54,5 @@ TEST(RenderOptionsTest, RefusesBadSizes) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

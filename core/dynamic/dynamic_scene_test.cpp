@@ -22,7 +22,7 @@
 #include "core/io/triangle_source.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 struct IndexedMesh {
   std::vector<float> vertices;
@@ -441,5 +441,5 @@ TEST_F(DynamicSceneTest, QueriesDuringAStreamOfUpdatesEachMatchOneVersion) {
                    "version " + std::to_string(q.snapshot->version));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -16,7 +16,7 @@
 #include "core/util/cancellation.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using gen_test::collect_spec;
 
@@ -263,5 +263,5 @@ TEST(GeneratorBench, DISABLED_Throughput) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

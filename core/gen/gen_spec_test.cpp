@@ -5,7 +5,7 @@
 #include <optional>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 GenSpec parse_ok(const std::string& text) {
   auto s = parse_gen_spec(text);
@@ -192,5 +192,5 @@ TEST(GenParams, RangeText) {
   EXPECT_FALSE(RealRange::positive().contains(0.0));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

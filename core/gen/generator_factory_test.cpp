@@ -10,7 +10,7 @@
 #include "core/source/source_factory.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 TEST(GeneratorFactory, Names) {
   EXPECT_EQ(generator_names(), (std::vector<std::string>{"city", "sphere", "stadium", "terrain", "torus"}));
@@ -114,5 +114,5 @@ TEST(GeneratorFactory, ReachableThroughOpenTriangleSource) {
   EXPECT_EQ(tris->size(), 80u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

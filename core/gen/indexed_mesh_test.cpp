@@ -6,7 +6,7 @@
 #include <random>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 TEST(GenIndexedMesh, RoundTripsTrianglesInOrder) {
   // Vertices drawn from a small pool, so many are shared; enough to force rehashes.
@@ -41,5 +41,5 @@ TEST(GenIndexedMesh, WeldsByExactBits) {
   EXPECT_EQ(mesh.triangles[1], (std::array<uint32_t, 3>{2, 0, 0}));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -5,7 +5,7 @@
 #include "core/gen/gen_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using gen_test::centroid_of;
 using gen_test::collect_spec;
@@ -73,5 +73,5 @@ TEST(StadiumGenerator, RestreamableAndSinkErrorsPropagate) {
   gen_test::expect_restreamable_and_sink_errors_propagate("gen:stadium?level=5");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -5,7 +5,7 @@
 #include "core/gen/gen_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using gen_test::collect_spec;
 using gen_test::normal_of;
@@ -117,5 +117,5 @@ TEST(TerrainGenerator, RestreamableAndSinkErrorsPropagate) {
   gen_test::expect_restreamable_and_sink_errors_propagate("gen:terrain?n=100");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

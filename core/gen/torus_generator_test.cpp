@@ -7,7 +7,7 @@
 #include "core/gen/gen_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using gen_test::centroid_of;
 using gen_test::closed_oriented_problem;
@@ -61,5 +61,5 @@ TEST(TorusGenerator, RestreamableAndSinkErrorsPropagate) {
   gen_test::expect_restreamable_and_sink_errors_propagate("gen:torus?nu=128&nv=64");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -11,7 +11,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 Vec3d lerp3(const Triangle& t, double u, double v) {
   return Vec3d(t.v0) * (1.0 - u - v) + Vec3d(t.v1) * u + Vec3d(t.v2) * v;
@@ -142,5 +142,5 @@ TEST(TriangleBoxOverlap, ThePerTriangleFormAgreesWithTheOneShotTest) {
   EXPECT_GT(column_rejected, boxes / 20);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -10,7 +10,7 @@
 #include <string>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 class BearerTokenFile : public ::testing::Test {
  protected:
@@ -69,5 +69,5 @@ TEST(BearerTokens, CompareExactly) {
   EXPECT_TRUE(tokens_equal("", ""));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

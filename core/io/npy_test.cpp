@@ -24,7 +24,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::read_file_bytes;
 using testing::TempDir;
@@ -535,5 +535,5 @@ TEST(NpyWrite, AFailedWriteKeepsTheEarlierFileAndLeavesNoTemporary) {
   EXPECT_TRUE(contains(on_directory.message(), dir.path())) << on_directory.to_string();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -18,7 +18,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::contains;
 using testing::Entry;
@@ -234,5 +234,5 @@ TEST(NpzMeshReader, FilesAreOpenedByExtensionAndOnlyWhenRegular) {
       << failed.status().to_string();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

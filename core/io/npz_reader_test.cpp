@@ -12,7 +12,7 @@
 #include "core/io/npz_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::Entry;
 using testing::zip_of;
@@ -74,5 +74,5 @@ TEST(NpzReader, HostileBytesNeverCrash) {
   EXPECT_GT(failures, 500);  // most damage is caught (the rest hit bytes nothing reads)
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

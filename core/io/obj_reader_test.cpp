@@ -10,7 +10,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::TempDir;
 using testing::write_text_file;
@@ -248,5 +248,5 @@ TEST(ObjReaderOutOfCore, SpillsOnlyWhenTheVerticesExceedTheAllowance) {
   testing::expect_spills_only_beyond(open_obj_file, path, 36);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

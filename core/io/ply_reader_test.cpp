@@ -15,7 +15,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::TempDir;
 using testing::write_text_file;
@@ -463,5 +463,5 @@ TEST(PlyReaderOutOfCore, SpillsOnlyWhenTheHeadersVerticesExceedTheAllowance) {
   testing::expect_spills_only_beyond(open_ply_file, path, 36);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

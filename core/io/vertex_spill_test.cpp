@@ -11,7 +11,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::TempDir;
 
@@ -124,5 +124,5 @@ TEST(SpillingFaceResolver, PlanStaysWithinTheAllowance) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

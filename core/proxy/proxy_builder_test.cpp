@@ -9,7 +9,7 @@
 #include "core/accel/brute_force_reference.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 Vec3f random_point(std::mt19937_64& rng, const Aabb& box) {
   std::uniform_real_distribution<float> u(0.0f, 1.0f);
@@ -309,5 +309,5 @@ TEST(ProxyBuilder, MarginsGrowWithTheScenesReachSoFarBricksStillSkip) {
   EXPECT_GT(tally.skipped, 5000);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

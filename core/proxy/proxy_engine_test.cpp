@@ -18,7 +18,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::TempDir;
 
@@ -249,5 +249,5 @@ TEST(ProxyEngine, TheEngineCachesItsProxiesInTheStoreAndRebuildsACorruptFile) {
   EXPECT_FALSE(std::filesystem::exists(file));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

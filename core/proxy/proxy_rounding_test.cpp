@@ -19,7 +19,7 @@
 #include "core/stress/stress_runner.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Euclidean distance (an upper bound of the max-norm one E bounds) between
 // the exact line o + t d and a triangle, in float64. Differences of floats are
@@ -175,5 +175,5 @@ TEST(ProxyRounding, EveryStructuresAcceptedHitsLieWithinTheRoundingBound) {
   EXPECT_LE(worst_watertight * 16 * kEps, kWatertightHitRounding);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

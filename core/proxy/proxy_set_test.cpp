@@ -15,7 +15,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::contains;
@@ -241,5 +241,5 @@ TEST_F(ProxySetTest, AnUnreadableBrickGetsNoProxyAndNothingIsWritten) {
   EXPECT_TRUE((*set)->brick(bad).may_hit(anything, 0, 1, kMollerTrumboreHitRounding));  // never skipped
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // A batch over a scene of 3 bricks, all resident under a budget that holds
 // them, with a structure that offers a resident set: every fast path open.
@@ -132,5 +132,5 @@ TEST(BatchPlanner, StrategiesHaveNames) {
   EXPECT_EQ(strategy_name(BatchStrategy::kQueued), "queued");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

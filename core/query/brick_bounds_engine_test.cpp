@@ -18,7 +18,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 struct Traced {
   std::vector<Hit> hits;
@@ -112,5 +112,5 @@ TEST(BrickBoundsEngine, AnUnknownBoundIsAnErrorNamingIt) {
   EXPECT_NE(engine.status().message().find("'kdop'"), std::string::npos) << engine.status().message();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -17,7 +17,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // An axis-aligned box as 8 vertices and 12 triangles (closed).
 constexpr float kBoxVertices[] = {0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 1, 1, 1, 0, 1, 1};
@@ -71,7 +71,8 @@ TEST_F(DynamicEngine, BatchesAnswerAsBruteForceOverStaticAndDynamicTogether) {
   const Vec3f e = b.extent();
   // One box through the bunny, one beside it.
   const auto inside = dynamic.add_instance(box->id, scaled_at(0.4 * e.x, Vec3d(b.center()) - Vec3d(e) * 0.2));
-  const auto beside = dynamic.add_instance(box->id, scaled_at(0.3 * e.x, Vec3d(b.hi) + Vec3d(0, -0.5 * e.y, 0)));
+  const auto beside =
+      dynamic.add_instance(box->id, scaled_at(0.3 * e.x, Vec3d(b.hi) + Vec3d(0, -0.5 * e.y, 0)));
   ASSERT_TRUE(inside.ok() && beside.ok());
   EXPECT_EQ(inside->id, 1u) << "dynamic ids continue after the store's one input";
   EXPECT_EQ(beside->id, 2u);
@@ -153,5 +154,5 @@ TEST_F(DynamicEngine, ABatchNamingAnOldVersionIsAnsweredAsItWas) {
   EXPECT_EQ(std::memcmp(removed.data(), alone.data(), removed.size() * sizeof(Hit)), 0);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

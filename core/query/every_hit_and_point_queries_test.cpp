@@ -18,7 +18,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::PackedScene;
 
@@ -348,5 +348,5 @@ TEST(OccupancyQuery, ParityIsNotTrustedOnEdgesOrAtTheOrigin) {
   EXPECT_FALSE(parity_of({}).odd);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -18,7 +18,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::TempDir;
 
@@ -819,5 +819,5 @@ TEST(QueryEngine, ReorderingLoadsEachBrickFewerTimesThanRayOrder) {
   EXPECT_EQ(reordered.brick_visits, in_order.brick_visits);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

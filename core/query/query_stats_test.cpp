@@ -6,7 +6,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Every figure set to a value of its own: uint64 ones 1, 2, 3, ... and
 // doubles 0.25, 0.75, 1.25, ... in list order, times `scale`.
@@ -122,5 +122,5 @@ TEST(QueryStatsList, EveryFigureHasAKeyAndTheListCountsThem) {
   EXPECT_EQ(fields, kQueryStatsFieldCount);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

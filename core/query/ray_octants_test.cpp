@@ -9,7 +9,7 @@
 #include <random>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // The packet lanes the rule above gives, lane by lane.
 uint32_t expected_lanes(const Ray* rays, const bool* valid) {
@@ -57,5 +57,5 @@ TEST(RayOctants, PacketLanesFollowTheOctantRuleWithHoles) {
   EXPECT_GT(packets, 1000u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

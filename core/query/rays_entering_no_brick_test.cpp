@@ -24,7 +24,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // The cube [0, 2]^3 as a closed shell, each face a 16 x 16 grid of quads
 // (coordinates multiples of 1/8: exact, so edges are shared bitwise).
@@ -336,5 +336,5 @@ TEST(RaysEnteringNoBrick, FewBricksFlatAnswerAsTheBruteForceAndAreCounted) {
   check_scene(1024, 2, 8);  // the flat walk
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

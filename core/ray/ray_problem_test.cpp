@@ -11,7 +11,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 std::vector<float> edge_values() {
   const float inf = std::numeric_limits<float>::infinity();
@@ -69,5 +69,5 @@ TEST(RayIsValid, EqualSegmentEndsAndZeroTnearAreValid) {
   EXPECT_FALSE(ray_is_valid(ray));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

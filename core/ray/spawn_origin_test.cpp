@@ -12,7 +12,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using testing::TempDir;
 
@@ -265,5 +265,5 @@ TEST_P(SpawnOriginEngine, NearNeighbourIsNotSkipped) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

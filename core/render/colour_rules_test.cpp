@@ -10,7 +10,7 @@
 #include <algorithm>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 TEST(ColourRulesTest, DepthRampMatchesNumpyInterpRoundedHalfAway) {
   const struct {
@@ -72,5 +72,5 @@ TEST(ColourRulesTest, ModeNames) {
   EXPECT_EQ(bad.status().message(), "--mode 'colour': must be depth, normals or ids");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -17,7 +17,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 struct ExpectedRay {
   uint32_t x, y;
@@ -187,5 +187,5 @@ TEST(PinholeCameraTest, AcceptsTheExtremesItDoesNotRefuse) {
   EXPECT_TRUE(PinholeRays::make(camera(60, {0, 0, 5}, {0, 0, 0}, {0, 1, 0}, kMaxImageSide, 1)).ok());
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -11,7 +11,7 @@
 #include "core/render/band_renderer.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 Hit hit_at(float t, uint32_t geometry, Vec3f normal) {
   Hit h;
@@ -122,5 +122,5 @@ TEST(RenderBandsTest, ATracersErrorEndsTheRender) {
   EXPECT_EQ(calls, 2);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

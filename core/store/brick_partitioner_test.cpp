@@ -10,7 +10,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Small random triangles scattered through a box, with a few long slivers;
 // primitive_id = position, so the permutation can be undone.
@@ -159,5 +159,5 @@ TEST(BrickPartitioner, UniformInputGivesBricksNearTheTargetSize) {
   EXPECT_LE(ranges.size(), 2 * input.size() / 1000);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -8,7 +8,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 Aabb box(Vec3f lo, Vec3f hi) {
   Aabb b;
@@ -194,5 +194,5 @@ TEST(CentroidGridPlan, AllInOneCellGivesOneGroupEvenAboveMax) {
   EXPECT_EQ(plan.group_count, 1u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -23,7 +23,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::model_path;
@@ -834,5 +834,5 @@ TEST(ScenePackerAtomicity, CancelledPackRemovesItsTemporaryDirectoryAndLeavesThe
   EXPECT_EQ(snapshot(out), before);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -16,7 +16,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 using testing::TempDir;
@@ -293,5 +293,5 @@ TEST_F(SceneStoreTest, ConcurrentLoadsFromManyThreadsReturnTheSameBricks) {
   EXPECT_EQ(mismatches, std::vector<int>(4, 0));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -16,7 +16,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 #ifdef OUTCORE_SANITIZE_BUILD
 constexpr uint32_t kStride = 16;
@@ -208,5 +208,5 @@ TEST(StressSuite, ConfigSelectionRejectsUnknownNames) {
   EXPECT_NE(bad.status().message().find("embree-robust"), std::string::npos) << bad.status().message();
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -21,7 +21,7 @@
 #include "core/upper/oriented_box.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Brute force per ray: fewer under the sanitizers' Debug build.
 #ifdef OUTCORE_SANITIZE_BUILD
@@ -193,5 +193,5 @@ TEST(BrickBoundingVolumes, RaysPassingFarAwayAreRejected) {
   EXPECT_FALSE(box.may_hit(away, 0, away.tfar, kWatertightHitRounding));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

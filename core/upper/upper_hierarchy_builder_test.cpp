@@ -8,7 +8,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 Aabb box(Vec3f lo, Vec3f hi) {
   Aabb b;
@@ -126,5 +126,5 @@ TEST(UpperHierarchyBuilder, ManyIdenticalBricksAmongDistinctOnesStillGiveLogarit
   EXPECT_LE(tree.depth(), depth_bound(bricks.size()));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

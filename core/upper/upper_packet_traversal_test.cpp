@@ -12,7 +12,7 @@
 #include "tests/support/grid_boxes.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Eight rays: from one pinhole through neighbouring pixels (coherent), or
 // each its own (origins on grid planes, zero direction components, short
@@ -88,5 +88,5 @@ TEST(UpperPacketTraversal, EveryLaneFindsBitwiseTheWindowOfItsOwnWalk) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -14,7 +14,7 @@
 #include "tests/support/grid_boxes.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // The grid of [-2, 2] (dense overlaps) for the boxes, [-4, 4] for the rays.
 std::vector<Aabb> tricky_boxes(std::size_t n, std::mt19937& rng) {
@@ -239,5 +239,5 @@ TEST(UpperTraversal, LargerHierarchiesAreNotFlattened) {
   EXPECT_FALSE(make_flat_leaves(UpperHierarchy{}, flat));
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

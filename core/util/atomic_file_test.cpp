@@ -13,7 +13,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 namespace fs = std::filesystem;
 
@@ -176,5 +176,5 @@ TEST(SyncFile, MissingFileFailsNamingIt) {
   EXPECT_NE(synced.message().find("cannot sync /nonexistent/outcore/file"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

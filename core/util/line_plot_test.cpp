@@ -6,7 +6,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 int count_color(const RgbImage& image, uint32_t color) {
   int n = 0;
@@ -75,5 +75,5 @@ TEST(LinePlotTest, RejectsBadInput) {
   EXPECT_TRUE(render_line_plot(one, log).ok());
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

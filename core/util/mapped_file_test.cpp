@@ -16,7 +16,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 constexpr std::size_t kPage = 4096;
 
@@ -155,5 +155,5 @@ TEST(MappedFile, AFifoIsRefusedAtOnceNamingWhatItIs) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -15,7 +15,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 constexpr std::size_t kPage = 4096;
 
@@ -213,5 +213,5 @@ TEST_F(PageReleaseQueueTest, TakeLeavesACopyThatSomeoneElseStillHolds) {
   EXPECT_EQ(queue.pending_bytes(), 0u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

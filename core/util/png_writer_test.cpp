@@ -12,7 +12,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 uint32_t get32(const std::vector<uint8_t>& b, std::size_t at) {
   return (uint32_t{b[at]} << 24) | (uint32_t{b[at + 1]} << 16) | (uint32_t{b[at + 2]} << 8) | b[at + 3];
@@ -101,5 +101,5 @@ TEST(PngWriterTest, RejectsBadSizesAndWritesFiles) {
   EXPECT_NE(bad.message().find("missing/a.png"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -10,7 +10,7 @@
 #include <thread>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // What a bar wrote into a temporary file (never a terminal).
 class CapturedOutput {
@@ -78,5 +78,5 @@ TEST(ProgressBar, DisabledBarsPrintNothing) {
   EXPECT_EQ(out.text(), "");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

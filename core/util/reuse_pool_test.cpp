@@ -5,7 +5,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 bool small_enough(const std::vector<int>& v) {
   return v.capacity() <= 100;
@@ -60,5 +60,5 @@ TEST(ReusePool, AMovedLeaseReturnsItsObjectOnce) {
   EXPECT_EQ(pool.spares(), 2u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -186,7 +186,7 @@ Expected<std::pair<int, struct stat>> open_and_stat(const std::string& name, int
   return std::pair{fd, info};
 }
 
-SharedObjectIdentity identity_of(const struct stat& info) {
+SharedObjectIdentity shared_object_identity_of(const struct stat& info) {
   return {static_cast<uint64_t>(info.st_dev), static_cast<uint64_t>(info.st_ino),
           static_cast<uint64_t>(info.st_size)};
 }
@@ -197,7 +197,7 @@ Expected<SharedObjectIdentity> SharedMemoryObject::identify(const std::string& n
   OUTCORE_RETURN_IF_ERROR(check_name(name));
   OUTCORE_ASSIGN_OR_RETURN(const auto opened, open_and_stat(name, O_RDONLY));
   ::close(opened.first);
-  return identity_of(opened.second);
+  return shared_object_identity_of(opened.second);
 }
 
 bool SharedMemoryObject::unlinked() const {
@@ -224,7 +224,7 @@ Expected<SharedMemoryObject> SharedMemoryObject::open(const std::string& name, s
     data = static_cast<char*>(mapped);
   }
   SharedMemoryObject object(name, data, size, mapped_bytes, /*owner=*/false);
-  object.identity_ = identity_of(info);
+  object.identity_ = shared_object_identity_of(info);
   object.descriptor_ = fd;  // for unlinked(); the mapping alone keeps the object
   return object;
 }
@@ -264,7 +264,7 @@ Expected<SharedMemoryObject> SharedMemoryObject::create(std::string_view suffix,
   const bool stated = fstat(fd, &info) == 0;
   ::close(fd);
   SharedMemoryObject object(name, static_cast<char*>(mapped), bytes, bytes, /*owner=*/true);
-  if (stated) object.identity_ = identity_of(info);
+  if (stated) object.identity_ = shared_object_identity_of(info);
   object.token_.resize(kTokenBytes);
   for (std::size_t i = 0; i < kTokenBytes; i += 4) {
     const uint32_t word = random();

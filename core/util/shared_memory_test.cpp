@@ -18,7 +18,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Shrinks the object behind every mapping of it, as a careless or hostile
 // client could while the server copies.
@@ -303,5 +303,5 @@ TEST(SharedMemoryObject, AnOpenedEmptyObjectMapsNothing) {
   EXPECT_EQ(opened->check_token(created->token()).code(), StatusCode::kOutOfRange);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

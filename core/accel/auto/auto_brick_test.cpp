@@ -16,7 +16,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::bounds_of;
@@ -239,5 +239,5 @@ TEST(AutoBrick, MalformedPayloadsAreRefusedNamingTheBrick) {
   EXPECT_GT(outcome.refused, 0u);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -21,7 +21,7 @@
 #include "tests/support/test_rays.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using Packed = testing::PackedScene;
 
@@ -244,5 +244,5 @@ TEST_F(AutoEngine, TheAccessTraceRecordsEachBricksStructureAndRays) {
   EXPECT_EQ(read->info.builder, "auto");
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -9,7 +9,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 std::vector<Triangle> cube_surface(float size) {
   const auto p = [&](int x, int y, int z) { return Vec3f(x * size, y * size, z * size); };
@@ -76,5 +76,5 @@ TEST(BrickFeatures, NothingGivesZeros) {
   EXPECT_EQ(f.area_ratio, 0.0);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -13,7 +13,7 @@
 #include "tests/support/test_paths.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 constexpr const char* kHeader =
     "# outcore cost profile, version 1\n"
@@ -148,5 +148,5 @@ TEST(CostProfile, SaveWritesWhatLoadReads) {
   EXPECT_EQ(loaded->machine, builtin_cost_profile().machine);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -36,7 +36,7 @@
 #include "core/accel/kdtree/split_tree_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::bounds_of;
 using accel_test::load_brick_from;
@@ -437,5 +437,5 @@ TEST(Bsp, DISABLED_MeasureAgainstTheKdTree) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -127,7 +127,7 @@ double quadratic(double f0, double f_half, double f1, double u) {
   return f0 * (1.0 - u) * (1.0 - 2.0 * u) + 4.0 * f_half * u * (1.0 - u) + f1 * u * (2.0 * u - 1.0);
 }
 
-struct Split {
+struct BspSplit {
   int direction = -1;
   float position = 0;
   double cost = std::numeric_limits<double>::infinity();
@@ -163,9 +163,9 @@ struct AreaModel {
   }
 };
 
-class Build {
+class BspBuild {
  public:
-  Build(const std::vector<Triangle>& triangles, const BspTreeBuilder::Config& config, BspTree& tree)
+  BspBuild(const std::vector<Triangle>& triangles, const BspTreeBuilder::Config& config, BspTree& tree)
       : triangles_(triangles),
         config_(config),
         tree_(tree),
@@ -220,7 +220,7 @@ class Build {
     return c;
   }
 
-  void consider(Split& best, uint32_t k, float s, const AreaModel& model, double area, std::size_t below,
+  void consider(BspSplit& best, uint32_t k, float s, const AreaModel& model, double area, std::size_t below,
                 std::size_t above) const {
     if (!(model.lo < s && s < model.hi)) return;
     // Empty space is cut off along the axes only: with the empty bonus, each
@@ -239,7 +239,7 @@ class Build {
   // reference goes below when it ends at or before the plane, above when it
   // starts at or after it (and does not end at it), else to both.
   void exact_candidates(const Refs& refs, uint32_t k, const AreaModel& model, double area,
-                        Split& best) const {
+                        BspSplit& best) const {
     for (const Ref& candidate : refs) {
       for (const float s : {candidate.extents.lo[k], candidate.extents.hi[k]}) {
         std::size_t below = 0, above = 0;
@@ -254,7 +254,7 @@ class Build {
   }
 
   void binned_candidates(const Refs& refs, uint32_t k, const AreaModel& model, double area,
-                         Split& best) const {
+                         BspSplit& best) const {
     constexpr uint32_t kBins = BspTreeBuilder::kBins;
     std::array<uint32_t, kBins> starts{}, ends{};
     const double scale = kBins / (model.hi - model.lo);
@@ -275,8 +275,8 @@ class Build {
     }
   }
 
-  Split best_split(const Refs& refs, const Dop& dop, const BspPolytope& cell) const {
-    Split best;
+  BspSplit best_split(const Refs& refs, const Dop& dop, const BspPolytope& cell) const {
+    BspSplit best;
     const double area = cell.area();
     if (!(area > 0.0)) return best;
     for (uint32_t k = 0; k < config_.directions; ++k) {
@@ -306,7 +306,7 @@ class Build {
     const auto index = static_cast<uint32_t>(tree_.nodes.size());
     tree_.nodes.emplace_back();
     const std::size_t n = refs.size();
-    Split split;
+    BspSplit split;
     if (n > 0 && depth < depth_limit_ && tree_.nodes.size() + 2 <= node_budget_ && !polytope.empty()) {
       split = best_split(refs, cell, polytope);
       if (!(split.cost < config_.intersection_cost * static_cast<double>(n))) split.direction = -1;
@@ -406,7 +406,7 @@ BspTreeBuilder::Result BspTreeBuilder::build(std::vector<Triangle> triangles,
   BspTree& tree = result.tree;
   if (triangles.empty()) return result;
   tree.adopt_triangles(std::move(triangles), ids);
-  Build build(tree.triangles, config, tree);
+  BspBuild build(tree.triangles, config, tree);
   result.peak_bytes = build.run();
   tree.trim();
   return result;

@@ -22,7 +22,7 @@ struct Task {
   uint32_t node, begin, end, depth;
 };
 
-struct Split {
+struct BinnedSplit {
   int axis = -1;
   uint32_t bin = 0;  // triangles in bins < bin go left
   double cost = std::numeric_limits<double>::infinity();
@@ -68,9 +68,9 @@ class SahBuild {
  private:
   // Builds `task`'s node: a leaf, or two children pushed on the stack.
   void build_node(const Task& task);
-  Split best_binned_split(const Task& task, const Aabb& bounds, const BinScale& scale);
+  BinnedSplit best_binned_split(const Task& task, const Aabb& bounds, const BinScale& scale);
   // The end of the left half of `task` after splitting it.
-  uint32_t partition(const Task& task, const Split& split, const Aabb& centroid_bounds,
+  uint32_t partition(const Task& task, const BinnedSplit& split, const Aabb& centroid_bounds,
                      const BinScale& scale);
 
   std::span<const Triangle> triangles_;
@@ -133,7 +133,7 @@ void SahBuild::build_node(const Task& task) {
     return;
   }
   const BinScale scale(centroid_bounds, bins_);
-  const Split best = task.depth < kMedianDepth ? best_binned_split(task, bounds, scale) : Split{};
+  const BinnedSplit best = task.depth < kMedianDepth ? best_binned_split(task, bounds, scale) : BinnedSplit{};
   const double leaf_cost = double{config_.intersection_cost} * count;
   if (count <= config_.max_leaf_size && (best.axis < 0 || leaf_cost <= best.cost)) {
     node.index = task.begin;
@@ -151,7 +151,7 @@ void SahBuild::build_node(const Task& task) {
   stack_.push_back({child, task.begin, mid, task.depth + 1});
 }
 
-Split SahBuild::best_binned_split(const Task& task, const Aabb& bounds, const BinScale& scale) {
+BinnedSplit SahBuild::best_binned_split(const Task& task, const Aabb& bounds, const BinScale& scale) {
   const uint32_t count = task.end - task.begin;
   std::fill(bin_bounds_.begin(), bin_bounds_.end(), Aabb{});
   std::fill(bin_counts_.begin(), bin_counts_.end(), 0u);
@@ -165,7 +165,7 @@ Split SahBuild::best_binned_split(const Task& task, const Aabb& bounds, const Bi
       ++bin_counts_[bin];
     }
   }
-  Split best;
+  BinnedSplit best;
   const double inv_area = bounds.half_area() > 0.0 ? 1.0 / bounds.half_area() : 0.0;
   for (int a = 0; a < 3; ++a) {
     if (!scale.usable[a]) continue;
@@ -192,7 +192,7 @@ Split SahBuild::best_binned_split(const Task& task, const Aabb& bounds, const Bi
   return best;
 }
 
-uint32_t SahBuild::partition(const Task& task, const Split& split, const Aabb& centroid_bounds,
+uint32_t SahBuild::partition(const Task& task, const BinnedSplit& split, const Aabb& centroid_bounds,
                              const BinScale& scale) {
   if (split.axis >= 0) {
     const auto first = order_.begin() + task.begin, last = order_.begin() + task.end;

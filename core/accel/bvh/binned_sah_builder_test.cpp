@@ -7,7 +7,7 @@
 #include "core/accel/accel_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Every triangle in exactly one leaf, boxes containing what is below them,
 // depth within bounds, leaves no larger than allowed.
@@ -95,5 +95,5 @@ TEST(BinnedSahBuilder, ConfigValidationNamesTheField) {
   EXPECT_NE(config.validate().message().find("intersection_cost"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

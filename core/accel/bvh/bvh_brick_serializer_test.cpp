@@ -20,7 +20,7 @@
 #include "core/accel/accel_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::load_brick_from;
@@ -250,5 +250,5 @@ TEST(BvhBrickSerializer, BuilderHasOneAndOtherStructuresNone) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -15,7 +15,7 @@
 #include "core/accel/bvh/bvh_traversal.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::bounds_of;
@@ -384,5 +384,5 @@ TEST(BvhBrick, BadBricksAreErrors) {
   }
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -15,7 +15,7 @@
 #include "core/ray/ray_types.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 WideBvh build(const std::vector<Triangle>& triangles) {
   std::vector<TriangleId> ids(triangles.size());
@@ -112,5 +112,5 @@ TEST(WideBvhRefit, TheTopLevelFollowsItsBoxes) {
   EXPECT_TRUE(wide_bvh_sah_cost({}) == 0.0);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

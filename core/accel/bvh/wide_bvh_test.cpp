@@ -26,7 +26,7 @@
 #include "core/accel/bvh/wide_bvh_trace.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::bounds_of;
@@ -432,5 +432,5 @@ TEST(WideBvh, SimdPathComesFromTheEnvironment) {
   EXPECT_EQ(*chosen, simd_path_supported(SimdPath::kAvx2) ? SimdPath::kAvx2 : SimdPath::kSse4);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

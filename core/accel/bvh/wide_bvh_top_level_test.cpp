@@ -6,7 +6,7 @@
 #include <vector>
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 // Walks the tree: each non-empty box is a leaf exactly once, under boxes that
 // hold it; children follow their parent; empty slots are in no mask.
@@ -79,5 +79,5 @@ TEST(WideBvhTopLevel, EmptyBoxesAndIdenticalCentresAreHandled) {
   expect_well_formed(nodes, boxes);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -31,7 +31,7 @@
 #include "core/accel/serializer_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::bounds_of;
@@ -483,5 +483,5 @@ TEST(GridBrickSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {
   EXPECT_NE((*made)->serializer()->structure_key().find("triangle_test=mt"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -24,9 +24,9 @@ struct PendingGrid {
   std::vector<uint32_t> triangles;
 };
 
-class Build {
+class HgridBuild {
  public:
-  Build(HierarchicalGrid& grid, const HierarchicalGridBuilder::Config& config)
+  HgridBuild(HierarchicalGrid& grid, const HierarchicalGridBuilder::Config& config)
       : grid_(grid), config_(config), n_(grid.triangles.size()) {}
 
   // Returns the peak scratch bytes.
@@ -218,7 +218,7 @@ HierarchicalGridBuilder::Result HierarchicalGridBuilder::build(std::vector<Trian
   if (triangles.empty()) return result;
   grid.records = hit_records_for(triangles, ids);
   grid.triangles = std::move(triangles);
-  Build build(grid, config);
+  HgridBuild build(grid, config);
   result.peak_bytes = build.run();
   // Exact capacities: memory_bytes() then equals a reloaded grid's.
   grid.grids.shrink_to_fit();

@@ -29,7 +29,7 @@
 #include "core/accel/serializer_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::load_brick_from;
@@ -413,5 +413,5 @@ TEST(HgridBrickSerializer, StructureKeysDifferExactlyWhenTheConfigDoes) {
   EXPECT_NE((*made)->serializer()->structure_key().find("triangle_test=mt"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -129,16 +129,16 @@ Aabb clipped_bounds(const Triangle& tri, const Aabb& box) {
 
 enum Side : uint8_t { kBoth = 0, kBelowOnly = 1, kAboveOnly = 2 };
 
-struct Split {
+struct KdSplit {
   int axis = -1;
   float position = 0;
   bool planar_below = true;  // triangles lying in the plane go below
   double cost = std::numeric_limits<double>::infinity();
 };
 
-class Build {
+class KdBuild {
  public:
-  Build(const std::vector<Triangle>& triangles, const KdTreeBuilder::Config& config, KdTree& tree)
+  KdBuild(const std::vector<Triangle>& triangles, const KdTreeBuilder::Config& config, KdTree& tree)
       : triangles_(triangles),
         config_(config),
         tree_(tree),
@@ -193,8 +193,8 @@ class Build {
   // The sweep over a node's sorted events, axis by axis: the cheapest plane
   // strictly inside the box (a plane on the box's face would make a child of
   // the same box).
-  Split best_split(const AxisEvents& events, uint32_t n, const Aabb& box) const {
-    Split best;
+  KdSplit best_split(const AxisEvents& events, uint32_t n, const Aabb& box) const {
+    KdSplit best;
     const double box_area = box.half_area();
     if (!(box_area > 0.0)) return best;
     const double scale = config_.intersection_cost / box_area;
@@ -236,7 +236,7 @@ class Build {
   }
 
   // Marks each of the node's triangles below, above or straddling `split`.
-  void classify(const AxisEvents& events, const Split& split) {
+  void classify(const AxisEvents& events, const KdSplit& split) {
     for (const Event e : events[0]) {
       if (event_type(e) != kEnd) side_[event_triangle(e)] = kBoth;
     }
@@ -258,7 +258,7 @@ class Build {
   void node(AxisEvents events, uint32_t n, const Aabb& box, uint32_t depth) {
     const auto index = static_cast<uint32_t>(tree_.nodes.size());
     tree_.nodes.emplace_back();
-    Split split;
+    KdSplit split;
     if (n > 0 && depth < depth_limit_ && tree_.nodes.size() + 2 <= node_budget_) {
       split = best_split(events, n, box);
       if (!(split.cost < config_.intersection_cost * n)) split.axis = -1;
@@ -386,7 +386,7 @@ KdTreeBuilder::Result KdTreeBuilder::build(std::vector<Triangle> triangles,
   if (triangles.empty()) return result;
   for (const Triangle& tri : triangles) tree.bounds.extend(tri.bounds());
   tree.adopt_triangles(std::move(triangles), ids);
-  Build build(tree.triangles, config, tree);
+  KdBuild build(tree.triangles, config, tree);
   result.peak_bytes = build.run(tree.bounds);
   tree.trim();
   return result;

@@ -28,7 +28,7 @@
 #include "core/accel/kdtree/split_tree_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::bounds_of;
 using accel_test::load_brick_from;
@@ -280,5 +280,5 @@ TEST(KdTree, TheFactoryMakesItByNameAndRejectsBadOptions) {
                                             sphere, build_tree(sphere), 50);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

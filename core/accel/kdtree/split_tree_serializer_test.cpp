@@ -26,7 +26,7 @@
 #include "core/accel/serializer_test_util.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::load_brick_from;
@@ -252,5 +252,5 @@ TYPED_TEST(SplitTreeSerializer, TheFactorysBuilderHasOne) {
   EXPECT_NE((*made)->serializer()->structure_key().find("triangle_test=mt"), std::string::npos);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -13,16 +13,16 @@ namespace outcore {
 namespace {
 
 // A node waiting to be made: its slot, box, depth and triangles.
-struct PendingNode {
+struct OctPendingNode {
   uint32_t slot;
   Aabb box;
   uint32_t depth;
   std::vector<uint32_t> triangles;
 };
 
-class Build {
+class OctreeBuild {
  public:
-  Build(const std::vector<Triangle>& triangles, const OctreeBuilder::Config& config, Octree& tree)
+  OctreeBuild(const std::vector<Triangle>& triangles, const OctreeBuilder::Config& config, Octree& tree)
       : triangles_(triangles), config_(config), tree_(tree) {
     bounds_.reserve(triangles.size());
     for (const Triangle& tri : triangles) bounds_.push_back(tri.bounds());
@@ -34,24 +34,24 @@ class Build {
 
   // Returns the peak scratch bytes.
   uint64_t run() {
-    PendingNode root{0, tree_.bounds, 0, {}};
+    OctPendingNode root{0, tree_.bounds, 0, {}};
     root.triangles.resize(triangles_.size());
     for (uint32_t k = 0; k < root.triangles.size(); ++k) root.triangles[k] = k;
     tree_.nodes.push_back(OctreeNode::leaf(0, 0));
     outstanding_ = root.triangles.size();
-    std::vector<PendingNode> stack;
+    std::vector<OctPendingNode> stack;
     stack.push_back(std::move(root));
     while (!stack.empty()) {
-      PendingNode node = std::move(stack.back());
+      OctPendingNode node = std::move(stack.back());
       stack.pop_back();
       make(node, stack);
-      peak_ = std::max(peak_, outstanding_ * sizeof(uint32_t) + stack.capacity() * sizeof(PendingNode));
+      peak_ = std::max(peak_, outstanding_ * sizeof(uint32_t) + stack.capacity() * sizeof(OctPendingNode));
     }
     return peak_ + bounds_.capacity() * sizeof(Aabb);
   }
 
  private:
-  void make(PendingNode& node, std::vector<PendingNode>& stack) {
+  void make(OctPendingNode& node, std::vector<OctPendingNode>& stack) {
     const std::size_t count = node.triangles.size();
     if (count > config_.max_leaf_size && node.depth < depth_limit_ && tree_.nodes.size() + 8 <= nodes_cap_) {
       std::array<std::vector<uint32_t>, 8> children = file(node);
@@ -83,7 +83,7 @@ class Build {
   // and, when they reach across the middle along two or more axes, that may
   // touch it (a connected triangle spread along one axis only touches every
   // child its bounds reach).
-  std::array<std::vector<uint32_t>, 8> file(const PendingNode& node) const {
+  std::array<std::vector<uint32_t>, 8> file(const OctPendingNode& node) const {
     std::array<std::vector<uint32_t>, 8> children;
     const Vec3f middle = octree_middle(node.box);
     const double margin = cell_filing_margin(node.box, Vec3d(node.box.hi) - Vec3d(node.box.lo));
@@ -132,7 +132,7 @@ uint64_t OctreeBuilder::tree_bytes_bound(uint64_t n) {
 // (within the reference budget twice), and the stack's entries.
 uint64_t OctreeBuilder::peak_bytes_bound(uint64_t n) {
   return n * sizeof(Aabb) + 2 * references_cap(n) * sizeof(uint32_t) +
-         (7 * kMaxOctreeDepth + 1) * sizeof(PendingNode);
+         (7 * kMaxOctreeDepth + 1) * sizeof(OctPendingNode);
 }
 
 OctreeBuilder::Result OctreeBuilder::build(std::vector<Triangle> triangles,
@@ -144,7 +144,7 @@ OctreeBuilder::Result OctreeBuilder::build(std::vector<Triangle> triangles,
   if (triangles.empty()) return result;
   for (const Triangle& tri : triangles) tree.bounds.extend(tri.bounds());
   tree.adopt_triangles(std::move(triangles), ids);
-  Build build(tree.triangles, config, tree);
+  OctreeBuild build(tree.triangles, config, tree);
   result.peak_bytes = build.run();
   tree.trim();
   return result;

@@ -23,7 +23,7 @@
 #include "core/accel/octree/octree_traversal.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::load_brick_from;
@@ -214,5 +214,5 @@ TEST(Octree, TheFactoryMakesItByNameAndRejectsBadOptions) {
       sphere, build_tree(sphere), 50);
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -14,16 +14,16 @@ namespace outcore {
 namespace {
 
 // A node waiting to be made: its slot, box, depth and triangles.
-struct PendingNode {
+struct QuadPendingNode {
   uint32_t slot;
   Aabb box;
   uint32_t depth;
   std::vector<uint32_t> triangles;
 };
 
-class Build {
+class QuadtreeBuild {
  public:
-  Build(const std::vector<Triangle>& triangles, const QuadtreeBuilder::Config& config, Quadtree& tree)
+  QuadtreeBuild(const std::vector<Triangle>& triangles, const QuadtreeBuilder::Config& config, Quadtree& tree)
       : triangles_(triangles), tree_(tree), axes_(quadtree_axes(tree.bounds)), config_(config) {
     bounds_.reserve(triangles.size());
     for (const Triangle& tri : triangles) bounds_.push_back(tri.bounds());
@@ -35,18 +35,18 @@ class Build {
 
   // Returns the peak scratch bytes.
   uint64_t run() {
-    PendingNode root{0, tree_.bounds, 0, {}};
+    QuadPendingNode root{0, tree_.bounds, 0, {}};
     root.triangles.resize(triangles_.size());
     for (uint32_t k = 0; k < root.triangles.size(); ++k) root.triangles[k] = k;
     tree_.nodes.push_back({});
     outstanding_ = root.triangles.size();
-    std::vector<PendingNode> stack;
+    std::vector<QuadPendingNode> stack;
     stack.push_back(std::move(root));
     while (!stack.empty()) {
-      PendingNode node = std::move(stack.back());
+      QuadPendingNode node = std::move(stack.back());
       stack.pop_back();
       make(node, stack);
-      peak_ = std::max(peak_, outstanding_ * sizeof(uint32_t) + stack.capacity() * sizeof(PendingNode));
+      peak_ = std::max(peak_, outstanding_ * sizeof(uint32_t) + stack.capacity() * sizeof(QuadPendingNode));
     }
     return peak_ + bounds_.capacity() * sizeof(Aabb);
   }
@@ -62,7 +62,7 @@ class Build {
     return {lo, hi};
   }
 
-  void make(PendingNode& node, std::vector<PendingNode>& stack) {
+  void make(QuadPendingNode& node, std::vector<QuadPendingNode>& stack) {
     const std::size_t count = node.triangles.size();
     const auto [w_lo, w_hi] = count == 0 ? std::pair<float, float>{0.0f, 0.0f} : w_extent(node.triangles);
     if (count > config_.max_leaf_size && node.depth < depth_limit_ && tree_.nodes.size() + 4 <= nodes_cap_) {
@@ -94,7 +94,7 @@ class Build {
   // column in the plane and, when they reach across both middles, that may
   // touch it (a connected triangle spread along one of the plane's axes
   // only touches every child its bounds reach).
-  std::array<std::vector<uint32_t>, 4> file(const PendingNode& node) const {
+  std::array<std::vector<uint32_t>, 4> file(const QuadPendingNode& node) const {
     std::array<std::vector<uint32_t>, 4> children;
     const float middle_u = quadtree_middle(node.box, axes_.u);
     const float middle_v = quadtree_middle(node.box, axes_.v);
@@ -142,7 +142,7 @@ uint64_t QuadtreeBuilder::tree_bytes_bound(uint64_t n) {
 // (within the reference budget twice), and the stack's entries.
 uint64_t QuadtreeBuilder::peak_bytes_bound(uint64_t n) {
   return n * sizeof(Aabb) + 2 * references_cap(n) * sizeof(uint32_t) +
-         (3 * kMaxQuadtreeDepth + 1) * sizeof(PendingNode);
+         (3 * kMaxQuadtreeDepth + 1) * sizeof(QuadPendingNode);
 }
 
 QuadtreeBuilder::Result QuadtreeBuilder::build(std::vector<Triangle> triangles,
@@ -154,7 +154,7 @@ QuadtreeBuilder::Result QuadtreeBuilder::build(std::vector<Triangle> triangles,
   if (triangles.empty()) return result;
   for (const Triangle& tri : triangles) tree.bounds.extend(tri.bounds());
   tree.adopt_triangles(std::move(triangles), ids);
-  Build build(tree.triangles, config, tree);
+  QuadtreeBuild build(tree.triangles, config, tree);
   result.peak_bytes = build.run();
   tree.trim();
   return result;

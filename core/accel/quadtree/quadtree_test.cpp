@@ -26,7 +26,7 @@
 #include "core/accel/quadtree/quadtree_traversal.h"
 
 namespace outcore {
-namespace {
+namespace OUTCORE_UNITY_ID {
 
 using accel_test::all_ids;
 using accel_test::load_brick_from;
@@ -309,5 +309,5 @@ TEST(Quadtree, TheFactoryMakesItByNameAndRejectsBadOptions) {
       terrain, build_tree(terrain), 51);  // more than 50
 }
 
-}  // namespace
+}  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore
