@@ -51,6 +51,9 @@ class BrickBuilder {
   virtual bool worth_rebuilding(const BrickAccel& /*accel*/, const BuildDemand& /*demand*/) const {
     return false;
   }
+  // Whether build_for() and worth_rebuilding() use the demand: the engine
+  // then counts, per brick, the rays of the batch that have it ahead.
+  virtual bool uses_demand() const { return false; }
   // The structure (a brick_accel_names() name) `accel`, made by this
   // builder, is: name() unless the builder chooses per brick.
   virtual std::string_view structure_of(const BrickAccel& /*accel*/) const { return name(); }

@@ -124,7 +124,7 @@ void BrickCache::count_build(const BrickAccel& accel, uint64_t bytes, double sec
   counters_.build_seconds += seconds;
 }
 
-Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays) {
+Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays, uint64_t rays_ahead) {
   if (brick_id >= entries_.size()) {
     // The same code and words as SceneStore::load_brick for the same mistake.
     return out_of_range("brick " + std::to_string(brick_id) + " does not exist (the scene has " +
@@ -137,7 +137,9 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays) {
 
   std::unique_lock lock(mutex_);
   entry.rays_served += rays;
-  BuildDemand demand{rays, entry.rays_served};
+  // The batch's rays still on their way to the brick count for this build only.
+  const uint64_t on_their_way = rays_ahead > rays ? rays_ahead - rays : 0;
+  BuildDemand demand{rays, entry.rays_served + on_their_way};
   bool waited = false;
   while (entry.state != State::kAbsent) {
     if (entry.state == State::kReady && entry.rays_served > 0 && entry.pins == 0 &&
@@ -178,7 +180,7 @@ Expected<PinnedBrick> BrickCache::acquire(uint32_t brick_id, uint64_t rays) {
   }
   entry.bytes = reservation;
   account(static_cast<int64_t>(reservation));
-  demand.rays_expected = entry.rays_served;
+  demand.rays_expected = entry.rays_served + on_their_way;
   lock.unlock();
 
   // Load from the tier, or load and build, outside the lock.

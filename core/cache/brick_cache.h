@@ -121,7 +121,10 @@ class BrickCache {
   // (BuildDemand) builds for it, and a ready, unpinned brick its builder
   // finds worth rebuilding for it is built again (counted in rebuilds and
   // builds, not in evictions).
-  Expected<PinnedBrick> acquire(uint32_t brick_id, uint64_t rays = 0);
+  // `rays_ahead`: rays of the caller's batch that have the brick ahead of
+  // them, these `rays` included (0: not known): the batch's use of the brick
+  // is expected to be at least that.
+  Expected<PinnedBrick> acquire(uint32_t brick_id, uint64_t rays = 0, uint64_t rays_ahead = 0);
   // Adds rays traced in bricks under pins acquired without a count
   // (rays_by_brick[b] for brick b; one lock for all) to their expected use.
   void add_rays_served(std::span<const uint64_t> rays_by_brick);

@@ -658,5 +658,26 @@ TEST_F(BrickCacheTest, RaysAreSummedPerBrickAndABrickWorthRebuildingIsRebuiltUnl
   EXPECT_EQ(demands->back().rays_expected, 8u);
 }
 
+TEST_F(BrickCacheTest, RaysAheadRaiseTheExpectedUseOfThisAcquisitionOnly) {
+  auto builder = std::make_unique<DemandBuilder>(1000);
+  const auto demands = builder->demands();
+  auto cache = make_cache(std::move(builder), kUnlimited);
+  // 20 rays queued, 300 of the batch with the brick ahead (the 20 among them).
+  ASSERT_TRUE(cache->acquire(5, 20, 300).ok());
+  ASSERT_EQ(demands->size(), 1u);
+  EXPECT_EQ(demands->back().rays_now, 20u);
+  EXPECT_EQ(demands->back().rays_expected, 300u);
+  // Fewer ahead than queued (not counted): the queue is the batch's use.
+  ASSERT_TRUE(cache->acquire(6, 50, 10).ok());
+  EXPECT_EQ(demands->back().rays_expected, 50u);
+  // Only rays traced are summed: after 20 served, 700 ahead expect 720, below
+  // the rebuild at 1000; 100 queued of 1000 ahead expect 20 + 100 + 900.
+  ASSERT_TRUE(cache->acquire(5, 0, 700).ok());
+  EXPECT_EQ(cache->counters().rebuilds, 0u);
+  ASSERT_TRUE(cache->acquire(5, 100, 1000).ok());
+  EXPECT_EQ(cache->counters().rebuilds, 1u);
+  EXPECT_EQ(demands->back().rays_expected, 1020u);  // 20 + 100 served, 900 more ahead
+}
+
 }  // namespace OUTCORE_UNITY_ID
 }  // namespace outcore

@@ -30,7 +30,8 @@ using MovedRays = std::vector<std::pair<uint32_t, uint32_t>>;
 
 // Takes `brick` from the cache into `pin` for `rays` rays (0: not known;
 // BrickCache::acquire), counting the acquisition and the wait in `tally`.
-Status acquire_brick(BrickCache& cache, uint32_t brick, uint64_t rays, PinnedBrick& pin, BatchTally& tally);
+Status acquire_brick(BrickCache& cache, uint32_t brick, uint64_t rays, PinnedBrick& pin, BatchTally& tally,
+                     uint64_t rays_ahead = 0);
 
 // What a parallel task that takes a brick from the cache reports.
 struct PinningTask {
@@ -42,7 +43,8 @@ struct PinningTask {
 
 // Takes `brick` from the cache for `task` to trace `rays` rays; nullopt
 // (the error kept in the task) when it cannot be had.
-std::optional<PinnedBrick> pin_for(BrickCache& cache, uint32_t brick, uint64_t rays, PinningTask& task);
+std::optional<PinnedBrick> pin_for(BrickCache& cache, uint32_t brick, uint64_t rays, PinningTask& task,
+                                   uint64_t rays_ahead = 0);
 
 // Adds a finished task's figures to the batch's (in task order).
 inline void merge_task(const PinningTask& task, BatchTally& tally) {

@@ -276,10 +276,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
                                           : dynamic_.at(options.dynamic_version));
   }
   const ReusePool<BatchScratch>::Lease scratch = scratch_pool_.take();
+  const uint32_t resident_bricks = cache_->counters().resident_bricks;
   const BatchPlan plan =
       plan_batch(options, {.rays = n,
                            .brick_count = brick_count,
-                           .resident_bricks = cache_->counters().resident_bricks,
+                           .resident_bricks = resident_bricks,
                            .cache_fits_scene = cache_fits_scene_,
                            .resident_set_max_bricks = cache_->builder().resident_set_max_bricks()});
   // The chunked strategies validate rays in their own chunks, and the queues
@@ -297,8 +298,11 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
   if (validate_apart)
     OUTCORE_RETURN_IF_ERROR(validate_batch(batch, options.strict, tally.stats.invalid_rays));
 
-  const bool track_demand =
-      options.reorder && plan.strategy != BatchStrategy::kInCacheSweep && cache_->wants_schedule_hint();
+  // A builder that chooses per brick wants the rays ahead of the bricks it
+  // is about to build: not counted (shared atomics) when every brick is resident.
+  const bool builds_ahead = cache_->builder().uses_demand() && resident_bricks < brick_count;
+  const bool track_demand = options.reorder && plan.strategy != BatchStrategy::kInCacheSweep &&
+                            (cache_->wants_schedule_hint() || builds_ahead);
   BrickDemand demand(track_demand, brick_count);
   // Trace-ahead is possible only when the budget cannot hold the scene.
   const bool ahead_possible = options.reorder && options.trace_ahead && !cache_fits_scene_;

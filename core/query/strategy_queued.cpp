@@ -93,6 +93,9 @@ class QueuedRun {
 
  private:
   bool ahead_possible() const { return ctx_.walk.ahead_state != nullptr; }
+  // The batch's rays that have `brick` ahead (0 when not counted): what a
+  // builder choosing per brick expects of it beyond its queue.
+  uint64_t rays_ahead(uint32_t brick) const { return ctx_.demand.tracking() ? ctx_.demand.of(brick) : 0; }
   RayProgress* progress() const { return ctx_.scratch.progress.data(); }
 
   void enqueue_moved(const MovedRays& moved) {
@@ -158,7 +161,8 @@ Status QueuedRun<kKind>::trace_resident_wave() {
   tbb::parallel_for(std::size_t{0}, tasks_.size(), [&](std::size_t t) {
     WaveTask& task = tasks_[t];
     moved_[t].clear();
-    const std::optional<PinnedBrick> pin = pin_for(ctx_.cache, task.brick, task.end - task.begin, task);
+    const std::optional<PinnedBrick> pin =
+        pin_for(ctx_.cache, task.brick, task.end - task.begin, task, rays_ahead(task.brick));
     if (!pin) return;
     const std::vector<uint32_t>& batch = wave_batches_[task.queue];
     const std::span<const uint32_t> ids(batch.data() + task.begin, task.end - task.begin);
@@ -225,7 +229,7 @@ void QueuedRun<kKind>::refresh_residency_and_hint() {
   if (!ctx_.gate.tracks_residency() && !ctx_.demand.tracking()) return;
   const std::vector<uint32_t> resident = ctx_.cache.resident_bricks();
   if (ctx_.gate.tracks_residency()) ctx_.gate.mark_known_resident(resident);
-  if (!ctx_.demand.tracking()) return;
+  if (!ctx_.demand.tracking() || !ctx_.cache.wants_schedule_hint()) return;
   // Belady on the known part of the schedule: resident bricks ranked by how
   // many rays still need them (most first); those no ray needs are left out,
   // and the policy evicts them first.
@@ -258,7 +262,8 @@ Status QueuedRun<kKind>::build_one(bool ahead_now) {
   const std::vector<uint32_t>& batch = wave_batches_[0];
   PinnedBrick pin;
   const uint64_t ahead_rays = ahead_now ? queues_.upcoming(brick).size() : 0;
-  OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx_.cache, brick, batch.size() + ahead_rays, pin, ctx_.tally));
+  OUTCORE_RETURN_IF_ERROR(
+      acquire_brick(ctx_.cache, brick, batch.size() + ahead_rays, pin, ctx_.tally, rays_ahead(brick)));
   ctx_.gate.set_known_resident(brick);
   const BrickAccel& accel = pin.accel();
   const std::size_t chunks = (batch.size() + kRayGrain - 1) / kRayGrain;
@@ -312,7 +317,7 @@ Status QueuedRun<kKind>::build_several(bool ahead_now) {
     const uint32_t brick = building_[q];
     const auto t0 = Clock::now();
     const std::size_t rays = wave_batches_[q].size() + (ahead_begin_[q + 1] - ahead_begin_[q]);
-    const std::optional<PinnedBrick> pin = pin_for(ctx_.cache, brick, rays, task);
+    const std::optional<PinnedBrick> pin = pin_for(ctx_.cache, brick, rays, task, rays_ahead(brick));
     if (!pin) return;
     trace_and_advance(ctx_.walk, progress(), brick, pin->accel(), wave_batches_[q], task.counters, moved_[q]);
     ahead_.trace_range(brick, pin->accel(), ahead_begin_[q], ahead_begin_[q + 1], ahead_.task_counters()[q]);

@@ -83,6 +83,7 @@ class AutoBrickBuilder final : public BrickBuilder {
   Expected<std::unique_ptr<BrickAccel>> build_for(BrickData&& brick,
                                                   const BuildDemand& demand) const override;
   bool worth_rebuilding(const BrickAccel& accel, const BuildDemand& demand) const override;
+  bool uses_demand() const override { return true; }
   std::string_view structure_of(const BrickAccel& accel) const override;
   uint64_t reserve_bytes(uint32_t triangle_count) const override;
   const std::string& name() const override { return name_; }
