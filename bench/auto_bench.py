@@ -7,7 +7,8 @@ a budget that holds the scene: `cold` is the first batch (every brick built
 for it: build + trace, what a one-off query pays), `served` the sum of the B
 batches (the same bricks serving a stream of batches, as under `serve`:
 auto may start cheap and rebuild bricks once their rays pay). Each figure is
-the median of --runs processes; ratios are against the best single structure
+the median of --runs processes (in rounds: each round runs every structure
+once); ratios are against the best single structure
 of the same run (auto's target: within 10 %, and faster than all on the
 mixed scene). Every structure's hits must equal the first's, bitwise.
 
@@ -55,23 +56,28 @@ def trace_stats(store, rays_path, batches, accel, extra=()):
 def rows_for(name, store, rays_path, count, runs, batches, structures):
     rows = []
     reference_hits = None
-    for accel in structures:
-        cold, served, builds = [], [], {}
-        for _ in range(runs):
+    cold = {accel: [] for accel in structures}
+    served = {accel: [] for accel in structures}
+    builds, rebuilds = {}, {}
+    # Rounds outermost: each round runs every structure once, so that the
+    # machine's drift over minutes weighs on all of them alike.
+    for _ in range(runs):
+        for accel in structures:
             stats, hits = trace_stats(store, rays_path, batches, accel)
-            cold.append(stats[0]["seconds"]["total"])
-            served.append(sum(s["seconds"]["total"] for s in stats))
-            builds = {k: sum(s["brick_builds_by_structure"][k] for s in stats)
-                      for k in stats[0]["brick_builds_by_structure"]}
-            rebuilds = sum(s["brick_rebuilds"] for s in stats)
-        if reference_hits is None:
-            reference_hits = hits + ".reference.npy"
-            os.replace(hits, reference_hits)
-        elif not filecmp.cmp(reference_hits, hits, shallow=False):
-            sys.exit(f"{name}: {accel}'s hits differ from {structures[0]}'s")
-        rows.append({"scene": name, "rays": count, "accel": accel, "cold_s": statistics.median(cold),
-                     "served_s": statistics.median(served), "builds": {k: v for k, v in builds.items() if v},
-                     "rebuilds": rebuilds})
+            cold[accel].append(stats[0]["seconds"]["total"])
+            served[accel].append(sum(s["seconds"]["total"] for s in stats))
+            builds[accel] = {k: sum(s["brick_builds_by_structure"][k] for s in stats)
+                             for k in stats[0]["brick_builds_by_structure"]}
+            rebuilds[accel] = sum(s["brick_rebuilds"] for s in stats)
+            if reference_hits is None:
+                reference_hits = hits + ".reference.npy"
+                os.replace(hits, reference_hits)
+            elif not filecmp.cmp(reference_hits, hits, shallow=False):
+                sys.exit(f"{name}: {accel}'s hits differ from {structures[0]}'s")
+    for accel in structures:
+        rows.append({"scene": name, "rays": count, "accel": accel, "cold_s": statistics.median(cold[accel]),
+                     "served_s": statistics.median(served[accel]),
+                     "builds": {k: v for k, v in builds[accel].items() if v}, "rebuilds": rebuilds[accel]})
     singles = [r for r in rows if r["accel"] != "auto"]
     for key in ("cold_s", "served_s"):
         best = min(r[key] for r in singles)
