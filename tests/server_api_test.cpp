@@ -364,8 +364,9 @@ TEST_F(ServerApi, PerRequestFiguresEqualTracesForTheSameRaysOnAFreshCache) {
   const grpc::Status status = stub->Intersect(&context, make_request(r), &response);
   ASSERT_TRUE(status.ok()) << status.error_message();
   const v1::QueryStats& s = response.stats();
+  // The budget holds the scene, so the proxies are asked at builds (a brick
+  // passed over only when no queued ray may hit it): tests, maybe no skips.
   EXPECT_GT(s.proxy_tests(), 0u);
-  EXPECT_GT(s.bricks_skipped_by_proxy(), 0u) << "the proxies skip nothing on these rays";
   const std::pair<const char*, uint64_t> figures[] = {
       {"rays", s.rays()},
       {"invalid_rays", s.invalid_rays()},

@@ -52,14 +52,12 @@ inline void merge_task(const PinningTask& task, BatchTally& tally) {
   tally.add_acquisition(task.was_hit);
 }
 
-// Traces the rays `ids` queued at `brick` there, then moves each to its next
-// brick, collecting (next brick, ray) in `moved` for the scheduler.
+// Moves each of the rays `ids`, done with `brick`, to its next brick,
+// collecting (next brick, ray) in `moved` for the scheduler.
 template <QueryKind kKind>
-void trace_and_advance(const RayWalk<kKind>& walk, RayProgress* progress, uint32_t brick,
-                       const BrickAccel& accel, std::span<const uint32_t> ids, VisitCounters& counters,
-                       MovedRays& moved) {
+void advance_past(const RayWalk<kKind>& walk, RayProgress* progress, uint32_t brick,
+                  std::span<const uint32_t> ids, VisitCounters& counters, MovedRays& moved) {
   const QueryBatch<kKind>& batch = walk.batch;
-  counters.visits_without_hit += batch.trace(accel, ids);
   if (walk.demand.tracking()) walk.demand.sub(brick, static_cast<uint32_t>(ids.size()));
   for (std::size_t k = 0; k < ids.size(); ++k) {
     if (k + kAdvancePrefetch < ids.size()) {
@@ -81,6 +79,15 @@ void trace_and_advance(const RayWalk<kKind>& walk, RayProgress* progress, uint32
       counters.rays_hit += batch.answered_hit(ray);
     }
   }
+}
+
+// Traces the rays `ids` queued at `brick` there, then advance_past().
+template <QueryKind kKind>
+void trace_and_advance(const RayWalk<kKind>& walk, RayProgress* progress, uint32_t brick,
+                       const BrickAccel& accel, std::span<const uint32_t> ids, VisitCounters& counters,
+                       MovedRays& moved) {
+  counters.visits_without_hit += walk.batch.trace(accel, ids);
+  advance_past(walk, progress, brick, ids, counters, moved);
 }
 
 }  // namespace outcore

@@ -6,6 +6,12 @@
 // about as much as tracing a small brick), so with reordering it is consulted
 // only for bricks not known to be resident: a fully cached scene pays nothing
 // for proxies. A stale view of what is resident costs at most a load or a test.
+// When the budget holds the scene (nothing is evicted, so a brick is built at
+// most once), the tests are deferred to the build: the queued strategy builds
+// a brick only if one of its queued rays may hit it, testing them until the
+// first that may, and otherwise passes them all over it (defer_to_builds()).
+// A brick no ray can hit is still never built; a brick that is built costs
+// one test or a few instead of one a ray.
 //
 // Before the proxy, the brick's bound (BrickBounds, --brick-bounds) when
 // one beyond the upper hierarchy's boxes was chosen: it is cheap and tested
@@ -42,6 +48,9 @@ class ProxyGate {
     mark_known_resident(resident);
   }
   bool tracks_residency() const { return !known_resident_.empty(); }
+  // Rays are sent to bricks untested; the builder of a brick tests its queue.
+  void defer_to_builds() { deferred_ = proxies_ != nullptr; }
+  bool defers_to_builds() const { return deferred_; }
   // The view becomes exactly `resident`.
   void mark_known_resident(const std::vector<uint32_t>& resident) {
     std::fill(known_resident_.begin(), known_resident_.end(), uint8_t{0});
@@ -51,10 +60,10 @@ class ProxyGate {
     if (!known_resident_.empty()) known_resident_[brick] = 1;
   }
 
-  // No test is wanted before sending a ray to `brick`: no proxies, or the
-  // brick is known to be resident.
+  // No test is wanted before sending a ray to `brick`: no proxies, tests
+  // deferred to builds, or the brick is known to be resident.
   bool needs_no_test(uint32_t brick) const {
-    return proxies_ == nullptr || (!known_resident_.empty() && known_resident_[brick]);
+    return proxies_ == nullptr || deferred_ || (!known_resident_.empty() && known_resident_[brick]);
   }
   // Whether `ray` over [tnear, tmax] may hit `brick` (proxies present);
   // counts the test and its ticks.
@@ -91,6 +100,7 @@ class ProxyGate {
   double hit_rounding_;
   const BrickBounds* bounds_;            // null: only the upper hierarchy's boxes
   std::vector<uint8_t> known_resident_;  // empty: no view kept
+  bool deferred_ = false;
 };
 
 }  // namespace outcore

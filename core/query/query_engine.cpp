@@ -263,7 +263,12 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
   const uint64_t ticks_start = ticks();
   const uint32_t brick_count = store_->brick_count();
   ProxyGate gate(proxies_.get(), cache_->builder().hit_rounding_scale(), bounds_.get());
-  if (proxies_ != nullptr && options.reorder) gate.track_residency(brick_count, cache_->resident_bricks());
+  if (proxies_ != nullptr && options.reorder) {
+    gate.track_residency(brick_count, cache_->resident_bricks());
+    // Nothing is ever evicted: a brick is built at most once, so its queue
+    // is tested when it is to be built rather than each ray on arrival.
+    if (cache_fits_scene_) gate.defer_to_builds();
+  }
   const CacheCounters counters_before = cache_->counters();
   const std::size_t n = rays.size();
   BatchTally tally;

@@ -79,7 +79,11 @@ class QueuedRun {
         OUTCORE_RETURN_IF_ERROR(trace_resident_wave());
         continue;
       }
-      const uint64_t building_reserve = take_longest_queues();
+      uint64_t building_reserve = take_longest_queues();
+      if (ctx_.gate.defers_to_builds()) {
+        building_reserve = pass_over_unhittable(building_reserve);
+        if (building_.empty()) continue;
+      }
       refresh_residency_and_hint();
       const bool ahead_now = builds_may_evict(building_reserve);
       if (building_.size() == 1) {
@@ -111,6 +115,7 @@ class QueuedRun {
   Status trace_resident_wave();
   Status trace_ahead_at_resident();
   uint64_t take_longest_queues();
+  uint64_t pass_over_unhittable(uint64_t building_reserve);
   void refresh_residency_and_hint();
   bool builds_may_evict(uint64_t building_reserve) const;
   Status build_one(bool ahead_now);
@@ -129,6 +134,7 @@ class QueuedRun {
   std::vector<BuildTask> build_tasks_;
   std::vector<std::size_t> ahead_begin_;
   std::vector<VisitCounters> chunk_counters_;
+  std::vector<uint8_t> passed_over_;  // per brick of building_: no queued ray may hit it
 };
 
 // Wave: every waiting brick that is resident now is traced at once, in
@@ -219,6 +225,48 @@ uint64_t QueuedRun<kKind>::take_longest_queues() {
     take_queue(b, q);
     building_reserve += ctx_.cache.builder().reserve_bytes(ctx_.store.manifest().bricks[b].triangle_count);
   }
+  return building_reserve;
+}
+
+// Proxy tests deferred to builds (ProxyGate::defer_to_builds): of the
+// bricks about to be built, one whose queued rays none may hit is not built;
+// its rays pass over it. Tested in parallel, brick by brick, each queue up
+// to its first ray that may hit. Returns the reservations of those kept.
+template <QueryKind kKind>
+uint64_t QueuedRun<kKind>::pass_over_unhittable(uint64_t building_reserve) {
+  const std::size_t count = building_.size();
+  passed_over_.assign(count, 0);
+  chunk_counters_.assign(count, VisitCounters{});
+  moved_.resize(std::max(moved_.size(), count));
+  tbb::parallel_for(std::size_t{0}, count, [&](std::size_t q) {
+    const uint32_t brick = building_[q];
+    const std::vector<uint32_t>& rays = wave_batches_[q];
+    VisitCounters& counters = chunk_counters_[q];
+    moved_[q].clear();
+    for (const uint32_t i : rays) {
+      if (ctx_.gate.may_hit(brick, ctx_.batch.rays[i], ctx_.batch.horizon(i), counters)) return;
+    }
+    passed_over_[q] = 1;
+    counters.skipped += rays.size();
+    advance_past(ctx_.walk, progress(), brick, rays, counters, moved_[q]);
+  });
+  std::size_t kept = 0;
+  for (std::size_t q = 0; q < count; ++q) {
+    ctx_.tally.add(chunk_counters_[q]);
+    const uint32_t brick = building_[q];
+    if (passed_over_[q] == 0) {
+      if (kept != q) {
+        building_[kept] = brick;
+        wave_batches_[kept].swap(wave_batches_[q]);
+      }
+      ++kept;
+      continue;
+    }
+    ctx_.tally.stats.brick_visits -= wave_batches_[q].size();  // counted when taken, not traced
+    building_reserve -= ctx_.cache.builder().reserve_bytes(ctx_.store.manifest().bricks[brick].triangle_count);
+    enqueue_moved(moved_[q]);
+  }
+  building_.resize(kept);
   return building_reserve;
 }
 

@@ -291,7 +291,10 @@ def test_last_stats_equal_traces_for_the_same_rays_on_a_fresh_cache(store, bound
         assert server.stop() == 0
     want = trace_stats(store, rays, tmp_path, "--threads", 1)
     assert {key: got[key] for key in ENGINE_COUNTS} == {key: want[key] for key in ENGINE_COUNTS}
-    assert got["bricks_skipped_by_proxy"] > 0 and got["proxy_tests"] >= got["bricks_skipped_by_proxy"]
+    # The budget holds the scene: the proxies are asked when a brick is to be
+    # built (passed over only when no queued ray may hit it), so tests, maybe
+    # no skips.
+    assert got["proxy_tests"] > 0 and got["proxy_tests"] >= got["bricks_skipped_by_proxy"]
     assert 0 < got["seconds_upper"] <= got["seconds_total"]
     assert totals["proxy_bytes"] == want["proxy_bytes"]
     for key in REQUEST_SUMS:
