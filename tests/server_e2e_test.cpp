@@ -228,8 +228,7 @@ TEST_F(ServerE2e, QueryStatsPrintTheFiguresTracePrintsForTheSameRays) {
     EXPECT_FALSE(want.empty()) << "no '" << prefix << "' line in trace's:\n" << t.stdout_text;
     EXPECT_EQ(figures_line(q.stdout_text, prefix), want) << q.stdout_text;
   }
-  EXPECT_TRUE(
-      std::regex_search(q.stdout_text, std::regex("proxies: [0-9]+ of [0-9]+ brick visits skipped")))
+  EXPECT_TRUE(std::regex_search(q.stdout_text, std::regex("proxies: [0-9]+ of [0-9]+ brick visits skipped")))
       << q.stdout_text;
   EXPECT_EQ(server->stop(SIGTERM), 0) << server->log();
 }

@@ -457,8 +457,8 @@ TEST_F(TraceCli, StatsReportProxySkipsBytesAndTimeAndNothingWithoutProxies) {
   ASSERT_TRUE(on.succeeded()) << on.describe();
   EXPECT_TRUE(contains(on.stdout_text, "brick visits skipped")) << on.stdout_text;
   EXPECT_TRUE(contains(on.stdout_text, "proxies: resolution 32")) << on.stdout_text;
-  const SubprocessResult off =
-      trace(rays_path_, out.file("h2.npy"), {"--stats", "--no-reorder", "--no-proxies", "--stats-json", off_json});
+  const SubprocessResult off = trace(rays_path_, out.file("h2.npy"),
+                                     {"--stats", "--no-reorder", "--no-proxies", "--stats-json", off_json});
   ASSERT_TRUE(off.succeeded()) << off.describe();
   EXPECT_TRUE(contains(off.stdout_text, "proxies: off")) << off.stdout_text;
   const std::string a = read_bytes(on_json), b = read_bytes(off_json);

@@ -263,7 +263,8 @@ uint64_t QueuedRun<kKind>::pass_over_unhittable(uint64_t building_reserve) {
       continue;
     }
     ctx_.tally.stats.brick_visits -= wave_batches_[q].size();  // counted when taken, not traced
-    building_reserve -= ctx_.cache.builder().reserve_bytes(ctx_.store.manifest().bricks[brick].triangle_count);
+    building_reserve -=
+        ctx_.cache.builder().reserve_bytes(ctx_.store.manifest().bricks[brick].triangle_count);
     enqueue_moved(moved_[q]);
   }
   building_.resize(kept);
