@@ -93,21 +93,12 @@ class AutoEngine : public ::testing::Test {
 Packed* AutoEngine::scene_ = nullptr;
 Packed* AutoEngine::bunny_ = nullptr;
 
-// Fewer rays under the sanitizers (many times slower), still enough for
-// evictions under the two-brick budget.
-#ifdef OUTCORE_SANITIZE_BUILD
-constexpr std::size_t kBitwiseRays = 2000;
-#else
-constexpr std::size_t kBitwiseRays = 6000;
-#endif
-
 TEST_F(AutoEngine, AnswersAreBitwiseTheBvhsAcrossBudgetsAndStrategies) {
   for (const auto& [scene, brick_triangles] : {std::pair{scene_, 2048}, std::pair{bunny_, 4096}}) {
     // On the mixed scene, aimed at its small parts (the terrain and the
     // bunny at the stadium's centre), so that many bricks are visited.
     const Aabb centre{Vec3f(-3, -3, -3), Vec3f(3, 3, 3)};
-    const std::vector<Ray> rays =
-        testing::make_test_rays(scene == bunny_ ? scene->bounds : centre, kBitwiseRays, 3);
+    const std::vector<Ray> rays = testing::make_test_rays(scene == bunny_ ? scene->bounds : centre, 6000, 3);
     const Answers bvh = trace(*scene, rays, with_accel("bvh"));
     ASSERT_FALSE(bvh.hits.empty());
     // About two bricks' worth of budget: bricks are evicted and rebuilt.
