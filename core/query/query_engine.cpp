@@ -264,10 +264,15 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
   const uint32_t brick_count = store_->brick_count();
   ProxyGate gate(proxies_.get(), cache_->builder().hit_rounding_scale(), bounds_.get());
   if (proxies_ != nullptr && options.reorder) {
-    gate.track_residency(brick_count, cache_->resident_bricks());
-    // Nothing is ever evicted: a brick is built at most once, so its queue
-    // is tested when it is to be built rather than each ray on arrival.
-    if (cache_fits_scene_) gate.defer_to_builds();
+    // Nothing is ever evicted when the budget holds the scene: a brick is
+    // built at most once, so its queue is tested when it is to be built
+    // rather than each ray on arrival, and no view of what is resident is
+    // needed. Otherwise rays are tested on arrival, at bricks not resident.
+    if (cache_fits_scene_) {
+      gate.defer_to_builds();
+    } else {
+      gate.track_residency(brick_count, cache_->resident_bricks());
+    }
   }
   const CacheCounters counters_before = cache_->counters();
   const std::size_t n = rays.size();

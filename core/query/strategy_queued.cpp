@@ -79,13 +79,13 @@ class QueuedRun {
         OUTCORE_RETURN_IF_ERROR(trace_resident_wave());
         continue;
       }
-      uint64_t building_reserve = take_longest_queues();
+      take_longest_queues();
       if (ctx_.gate.defers_to_builds()) {
-        building_reserve = pass_over_unhittable(building_reserve);
+        pass_over_unhittable();
         if (building_.empty()) continue;
       }
       refresh_residency_and_hint();
-      const bool ahead_now = builds_may_evict(building_reserve);
+      const bool ahead_now = builds_may_evict(building_reserve());
       if (building_.size() == 1) {
         OUTCORE_RETURN_IF_ERROR(build_one(ahead_now));
       } else {
@@ -114,8 +114,9 @@ class QueuedRun {
 
   Status trace_resident_wave();
   Status trace_ahead_at_resident();
-  uint64_t take_longest_queues();
-  uint64_t pass_over_unhittable(uint64_t building_reserve);
+  void take_longest_queues();
+  void pass_over_unhittable();
+  uint64_t building_reserve() const;
   void refresh_residency_and_hint();
   bool builds_may_evict(uint64_t building_reserve) const;
   Status build_one(bool ahead_now);
@@ -206,9 +207,9 @@ Status QueuedRun<kKind>::trace_ahead_at_resident() {
 // Nothing waiting is resident: the bricks with the longest queues are to be
 // built, at least as many as there are threads (a brick's load and build are
 // mostly serial, so one build at a time would leave cores idle) and up to
-// kBuildsPerThread each. Takes their queues; returns their reservations.
+// kBuildsPerThread each. Takes their queues.
 template <QueryKind kKind>
-uint64_t QueuedRun<kKind>::take_longest_queues() {
+void QueuedRun<kKind>::take_longest_queues() {
   std::vector<uint32_t>& waiting = queues_.waiting();
   const std::size_t want = std::min<std::size_t>(loop_bricks_, waiting.size());
   const auto wanted_end = waiting.begin() + static_cast<std::ptrdiff_t>(want);
@@ -219,21 +220,24 @@ uint64_t QueuedRun<kKind>::take_longest_queues() {
   building_.assign(waiting.begin(), wanted_end);
   waiting.erase(waiting.begin(), wanted_end);
   if (wave_batches_.size() < want) wave_batches_.resize(want);
-  uint64_t building_reserve = 0;
-  for (std::size_t q = 0; q < want; ++q) {
-    const uint32_t b = building_[q];
-    take_queue(b, q);
-    building_reserve += ctx_.cache.builder().reserve_bytes(ctx_.store.manifest().bricks[b].triangle_count);
-  }
-  return building_reserve;
+  for (std::size_t q = 0; q < want; ++q) take_queue(building_[q], q);
+}
+
+// The reservations of the bricks about to be built.
+template <QueryKind kKind>
+uint64_t QueuedRun<kKind>::building_reserve() const {
+  uint64_t reserve = 0;
+  for (const uint32_t b : building_)
+    reserve += ctx_.cache.builder().reserve_bytes(ctx_.store.manifest().bricks[b].triangle_count);
+  return reserve;
 }
 
 // Proxy tests deferred to builds (ProxyGate::defer_to_builds): of the
 // bricks about to be built, one whose queued rays none may hit is not built;
 // its rays pass over it. Tested in parallel, brick by brick, each queue up
-// to its first ray that may hit. Returns the reservations of those kept.
+// to its first ray that may hit.
 template <QueryKind kKind>
-uint64_t QueuedRun<kKind>::pass_over_unhittable(uint64_t building_reserve) {
+void QueuedRun<kKind>::pass_over_unhittable() {
   const std::size_t count = building_.size();
   passed_over_.assign(count, 0);
   chunk_counters_.assign(count, VisitCounters{});
@@ -263,12 +267,9 @@ uint64_t QueuedRun<kKind>::pass_over_unhittable(uint64_t building_reserve) {
       continue;
     }
     ctx_.tally.stats.brick_visits -= wave_batches_[q].size();  // counted when taken, not traced
-    building_reserve -=
-        ctx_.cache.builder().reserve_bytes(ctx_.store.manifest().bricks[brick].triangle_count);
     enqueue_moved(moved_[q]);
   }
   building_.resize(kept);
-  return building_reserve;
 }
 
 // One look at what is resident serves both the proxies' view and the
