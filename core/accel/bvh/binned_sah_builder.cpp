@@ -1,86 +1,93 @@
 #include "core/accel/bvh/binned_sah_builder.h"
 
+#include <immintrin.h>
+
 #include <algorithm>
+#include <bit>
 #include <cassert>
 #include <cmath>
 #include <limits>
 #include <string>
 
+#include "core/accel/bvh/binned_sah_split.h"
+
 namespace outcore {
 namespace {
 
+using binned_sah::BinnedSplit;
+using binned_sah::BinScale;
+using binned_sah::Box4;
+using binned_sah::kMaxBins;
+
 // Below this depth every split is an object median (see the header).
 constexpr uint32_t kMedianDepth = kMaxBvhDepth - 33;
-constexpr uint32_t kMaxBins = 256;
 // The wide collapse (wide_bvh_collapse.h) turns any subtree of at most one
 // packet (8 triangles) into a single leaf, so splitting such a node is work
 // the traced tree never sees: most nodes of a binary tree are that small.
 constexpr uint32_t kLeafWithoutSplit = 8;
-constexpr uint64_t kScratchBytes = 3 * kMaxBins * (sizeof(Aabb) + sizeof(uint32_t)) + kMaxBins * 16 + 4096;
+
+// A triangle as the build moves it: its box and centroid as SSE rows, its
+// index in hi[3]. The partitions move these in place, so every pass over a
+// node reads one contiguous run instead of gathering boxes and centroids
+// through an index array (what made the build memory-bound).
+struct alignas(16) PrimRef {
+  float lo[4];        // x, y, z, 0
+  float hi[4];        // x, y, z, index (its bits)
+  float centroid[4];  // x, y, z, 0
+
+  uint32_t index() const { return std::bit_cast<uint32_t>(hi[3]); }
+};
+static_assert(sizeof(PrimRef) == 48);
+
+// Two runs' boxes and centroid boxes, gathered while partitioning.
+struct HalfBounds {
+  Box4 bounds[2], centroids[2];
+
+  void add(int half, const PrimRef& p) {
+    const __m128 c = _mm_load_ps(p.centroid);
+    bounds[half].extend(_mm_load_ps(p.lo), _mm_load_ps(p.hi));
+    centroids[half].extend(c, c);
+  }
+};
 
 struct Task {
   uint32_t node, begin, end, depth;
+  Box4 bounds, centroids;
 };
 
-struct BinnedSplit {
-  int axis = -1;
-  uint32_t bin = 0;  // triangles in bins < bin go left
-  double cost = std::numeric_limits<double>::infinity();
-};
+// The walk is depth first, so at most one pending sibling a level is stacked.
+constexpr std::size_t kMaxPendingTasks = 2 * kMaxBvhDepth;
+constexpr uint64_t kScratchBytes = 3 * kMaxBins * (sizeof(Box4) + sizeof(uint32_t)) +
+                                   kMaxBins * sizeof(double) + kMaxPendingTasks * sizeof(Task) + 4096;
 
-// Per-axis bin scale of one node's centroid bounds; an axis whose centroids
-// do not spread (or whose spread is too small to scale) offers no split.
-struct BinScale {
-  float lo[3], scale[3];
-  bool usable[3];
-  uint32_t bins;
-
-  BinScale(const Aabb& centroid_bounds, uint32_t bin_count) : bins(bin_count) {
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = centroid_bounds.lo[a];
-      const float extent = centroid_bounds.hi[a] - centroid_bounds.lo[a];
-      scale[a] = extent > 0.0f ? static_cast<float>(bins) / extent : 0.0f;
-      usable[a] = extent > 0.0f && std::isfinite(scale[a]);
-    }
-  }
-  uint32_t bin_of(const Vec3f& c, int a) const {
-    const float x = (c[a] - lo[a]) * scale[a];
-    return std::min(bins - 1, static_cast<uint32_t>(std::max(0.0f, x)));
-  }
-};
-
-// One build's working state: the centroids, the order being partitioned, the
-// nodes, and the bins reused by every node.
+// One build's working state: the triangles' references being partitioned,
+// the nodes, and the bins reused by every node.
 class SahBuild {
  public:
-  SahBuild(std::span<const Triangle> triangles, const BinnedSahBuilder::Config& config,
-           std::vector<uint32_t>& order)
-      : triangles_(triangles), config_(config), bins_(config.bin_count), order_(order) {}
+  SahBuild(std::span<const Triangle> triangles, const BinnedSahBuilder::Config& config)
+      : triangles_(triangles), config_(config), bins_(config.bin_count) {}
 
   // Builds the tree; returns the bytes held while building.
   uint64_t run();
   std::vector<BvhNode>& nodes() { return nodes_; }
-  void release_centroids() {
-    centroids_ = {};
-    bounds_ = {};
-  }
+  // The triangles' order (position j holds triangle order[j]); frees the references.
+  void take_order(std::vector<uint32_t>& order);
 
  private:
   // Builds `task`'s node: a leaf, or two children pushed on the stack.
   void build_node(const Task& task);
   BinnedSplit best_binned_split(const Task& task, const Aabb& bounds, const BinScale& scale);
-  // The end of the left half of `task` after splitting it.
+  // The end of the left half of `task` after splitting it; halves gets the
+  // two halves' boxes.
   uint32_t partition(const Task& task, const BinnedSplit& split, const Aabb& centroid_bounds,
-                     const BinScale& scale);
+                     const BinScale& scale, HalfBounds& halves);
 
   std::span<const Triangle> triangles_;
   const BinnedSahBuilder::Config& config_;
   const uint32_t bins_;
-  std::vector<uint32_t>& order_;
-  std::vector<Vec3f> centroids_;
-  std::vector<Aabb> bounds_;  // each triangle's, computed once
+  std::vector<PrimRef> prims_;
   std::vector<BvhNode> nodes_;
-  std::vector<Aabb> bin_bounds_;
+  std::vector<Box4> bin_boxes_;
   std::vector<uint32_t> bin_counts_;
   std::vector<double> right_cost_;  // area * count of bins >= b on one axis
   std::vector<Task> stack_;
@@ -88,23 +95,28 @@ class SahBuild {
 
 uint64_t SahBuild::run() {
   const uint32_t n = static_cast<uint32_t>(triangles_.size());
-  centroids_.resize(n);
-  bounds_.resize(n);
+  prims_.resize(n);
+  Task root{0, 0, n, 1, {}, {}};
   for (uint32_t k = 0; k < n; ++k) {
-    centroids_[k] = triangles_[k].centroid();
-    bounds_[k] = triangles_[k].bounds();
+    const Aabb b = triangles_[k].bounds();
+    const Vec3f c = triangles_[k].centroid();
+    PrimRef& p = prims_[k];
+    p = {{b.lo.x, b.lo.y, b.lo.z, 0.0f},
+         {b.hi.x, b.hi.y, b.hi.z, std::bit_cast<float>(k)},
+         {c.x, c.y, c.z, 0.0f}};
+    const __m128 centroid = _mm_load_ps(p.centroid);
+    root.bounds.extend(_mm_load_ps(p.lo), _mm_load_ps(p.hi));
+    root.centroids.extend(centroid, centroid);
   }
-  order_.resize(n);
-  for (uint32_t k = 0; k < n; ++k) order_[k] = k;
   nodes_.reserve(2 * uint64_t{n} - 1);
   nodes_.emplace_back();
-  const uint64_t build_bytes = centroids_.capacity() * sizeof(Vec3f) + bounds_.capacity() * sizeof(Aabb) +
-                               order_.capacity() * sizeof(uint32_t) + nodes_.capacity() * sizeof(BvhNode) +
-                               kScratchBytes;
-  bin_bounds_.resize(3 * bins_);
+  const uint64_t build_bytes =
+      prims_.capacity() * sizeof(PrimRef) + nodes_.capacity() * sizeof(BvhNode) + kScratchBytes;
+  bin_boxes_.resize(3 * bins_);
   bin_counts_.resize(3 * bins_);
   right_cost_.resize(bins_);
-  stack_.push_back({0, 0, n, 1});
+  stack_.reserve(kMaxPendingTasks);
+  stack_.push_back(root);
   while (!stack_.empty()) {
     const Task task = stack_.back();
     stack_.pop_back();
@@ -113,13 +125,15 @@ uint64_t SahBuild::run() {
   return build_bytes;
 }
 
+void SahBuild::take_order(std::vector<uint32_t>& order) {
+  order.resize(prims_.size());
+  for (std::size_t j = 0; j < prims_.size(); ++j) order[j] = prims_[j].index();
+  prims_ = {};
+}
+
 void SahBuild::build_node(const Task& task) {
   const uint32_t count = task.end - task.begin;
-  Aabb bounds, centroid_bounds;
-  for (uint32_t j = task.begin; j < task.end; ++j) {
-    bounds.extend(bounds_[order_[j]]);
-    centroid_bounds.extend(centroids_[order_[j]]);
-  }
+  const Aabb bounds = task.bounds.aabb();
   BvhNode& node = nodes_[task.node];
   node.bounds = bounds;
   if (count == 1) {
@@ -132,6 +146,7 @@ void SahBuild::build_node(const Task& task) {
     node.count = count;
     return;
   }
+  const Aabb centroid_bounds = task.centroids.aabb();
   const BinScale scale(centroid_bounds, bins_);
   const BinnedSplit best = task.depth < kMedianDepth ? best_binned_split(task, bounds, scale) : BinnedSplit{};
   const double leaf_cost = double{config_.intersection_cost} * count;
@@ -140,76 +155,69 @@ void SahBuild::build_node(const Task& task) {
     node.count = count;
     return;
   }
-  const uint32_t mid = partition(task, best, centroid_bounds, scale);
+  HalfBounds halves;
+  const uint32_t mid = partition(task, best, centroid_bounds, scale, halves);
   assert(mid > task.begin && mid < task.end);
   const uint32_t child = static_cast<uint32_t>(nodes_.size());
   node.index = child;
   node.count = 0;
   nodes_.emplace_back();  // no reallocation: reserved for a full tree
   nodes_.emplace_back();
-  stack_.push_back({child + 1, mid, task.end, task.depth + 1});
-  stack_.push_back({child, task.begin, mid, task.depth + 1});
+  stack_.push_back({child + 1, mid, task.end, task.depth + 1, halves.bounds[1], halves.centroids[1]});
+  stack_.push_back({child, task.begin, mid, task.depth + 1, halves.bounds[0], halves.centroids[0]});
 }
 
 BinnedSplit SahBuild::best_binned_split(const Task& task, const Aabb& bounds, const BinScale& scale) {
-  const uint32_t count = task.end - task.begin;
-  std::fill(bin_bounds_.begin(), bin_bounds_.end(), Aabb{});
+  std::fill(bin_boxes_.begin(), bin_boxes_.end(), Box4{});
   std::fill(bin_counts_.begin(), bin_counts_.end(), 0u);
+  // All three axes' bins at once: lane a is BinScale::bin_of(c, a)'s IEEE
+  // operations (an unusable axis's lane is clamped into range and ignored).
+  const __m128 lo = _mm_setr_ps(scale.lo[0], scale.lo[1], scale.lo[2], 0.0f);
+  const __m128 factor = _mm_setr_ps(scale.scale[0], scale.scale[1], scale.scale[2], 0.0f);
+  const __m128 zero = _mm_setzero_ps(), last = _mm_set1_ps(static_cast<float>(bins_ - 1));
+  const __m128i offsets = _mm_setr_epi32(0, static_cast<int>(bins_), static_cast<int>(2 * bins_), 0);
+  Box4* boxes = bin_boxes_.data();
+  uint32_t* counts = bin_counts_.data();
   for (uint32_t j = task.begin; j < task.end; ++j) {
-    const Aabb& b = bounds_[order_[j]];
-    const Vec3f& c = centroids_[order_[j]];
+    const PrimRef& p = prims_[j];
+    // max(x, 0) returns 0 for a NaN x, as std::max(0.0f, x) does.
+    const __m128 x =
+        _mm_min_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(p.centroid), lo), factor), zero), last);
+    alignas(16) int32_t bin[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(bin), _mm_add_epi32(_mm_cvttps_epi32(x), offsets));
+    const __m128 box_lo = _mm_load_ps(p.lo), box_hi = _mm_load_ps(p.hi);
     for (int a = 0; a < 3; ++a) {
-      if (!scale.usable[a]) continue;
-      const uint32_t bin = a * bins_ + scale.bin_of(c, a);
-      bin_bounds_[bin].extend(b);
-      ++bin_counts_[bin];
+      boxes[bin[a]].extend(box_lo, box_hi);
+      ++counts[bin[a]];
     }
   }
-  BinnedSplit best;
-  const double inv_area = bounds.half_area() > 0.0 ? 1.0 / bounds.half_area() : 0.0;
-  for (int a = 0; a < 3; ++a) {
-    if (!scale.usable[a]) continue;
-    const Aabb* ab = &bin_bounds_[a * bins_];
-    const uint32_t* ac = &bin_counts_[a * bins_];
-    Aabb right;
-    uint32_t right_count = 0;
-    for (uint32_t b = bins_ - 1; b > 0; --b) {
-      right.extend(ab[b]);
-      right_count += ac[b];
-      right_cost_[b] = right.half_area() * right_count;
-    }
-    Aabb left;
-    uint32_t left_count = 0;
-    for (uint32_t b = 1; b < bins_; ++b) {
-      left.extend(ab[b - 1]);
-      left_count += ac[b - 1];
-      if (left_count == 0 || left_count == count) continue;
-      const double cost = config_.traversal_cost + config_.intersection_cost * inv_area *
-                                                       (left.half_area() * left_count + right_cost_[b]);
-      if (cost < best.cost) best = {a, b, cost};
-    }
-  }
-  return best;
+  return binned_sah::cheapest_split(boxes, counts, scale, task.end - task.begin, bounds, config_,
+                                    right_cost_.data());
 }
 
 uint32_t SahBuild::partition(const Task& task, const BinnedSplit& split, const Aabb& centroid_bounds,
-                             const BinScale& scale) {
+                             const BinScale& scale, HalfBounds& halves) {
   if (split.axis >= 0) {
-    const auto first = order_.begin() + task.begin, last = order_.begin() + task.end;
-    return static_cast<uint32_t>(
-        std::partition(first, last,
-                       [&](uint32_t k) { return scale.bin_of(centroids_[k], split.axis) < split.bin; }) -
-        order_.begin());
+    const int axis = split.axis;
+    const auto goes_left = [&](const PrimRef& p) { return scale.bin_of(p.centroid[axis], axis) < split.bin; };
+    uint32_t i = task.begin, j = task.end;
+    while (true) {
+      while (i < j && goes_left(prims_[i])) halves.add(0, prims_[i++]);
+      while (i < j && !goes_left(prims_[j - 1])) halves.add(1, prims_[--j]);
+      if (i == j) return i;
+      std::swap(prims_[i], prims_[j - 1]);
+    }
   }
   // Object median along the widest centroid spread (index order when the
   // centroids coincide): always two non-empty halves.
   const int axis = centroid_bounds.largest_axis();
   const uint32_t mid = task.begin + (task.end - task.begin) / 2;
-  std::nth_element(order_.begin() + task.begin, order_.begin() + mid, order_.begin() + task.end,
-                   [&](uint32_t x, uint32_t y) {
-                     const float cx = centroids_[x][axis], cy = centroids_[y][axis];
-                     return cx < cy || (cx == cy && x < y);
+  std::nth_element(prims_.begin() + task.begin, prims_.begin() + mid, prims_.begin() + task.end,
+                   [&](const PrimRef& x, const PrimRef& y) {
+                     const float cx = x.centroid[axis], cy = y.centroid[axis];
+                     return cx < cy || (cx == cy && x.index() < y.index());
                    });
+  for (uint32_t j = task.begin; j < task.end; ++j) halves.add(j < mid ? 0 : 1, prims_[j]);
   return mid;
 }
 
@@ -234,18 +242,19 @@ Status BinnedSahBuilder::Config::validate() const {
 }
 
 uint64_t BinnedSahBuilder::peak_bytes_bound(uint64_t n) {
-  // centroids, bounds + order + nodes reserved for a full binary tree (2n - 1), then
-  // order + that + the exact copy (again at most 2n - 1 nodes).
-  return kScratchBytes + n * (sizeof(Vec3f) + sizeof(Aabb) + sizeof(uint32_t)) + 4 * n * sizeof(BvhNode);
+  // The references + nodes reserved for a full binary tree (2n - 1), then the
+  // order beside them, then order + that + the exact copy (again at most
+  // 2n - 1 nodes).
+  return kScratchBytes + n * (sizeof(PrimRef) + sizeof(uint32_t)) + 4 * n * sizeof(BvhNode);
 }
 
 BinnedSahBuilder::Result BinnedSahBuilder::build(std::span<const Triangle> triangles, const Config& config) {
   assert(config.validate().ok());
   Result result;
   if (triangles.empty()) return result;
-  SahBuild build(triangles, config, result.order);
-  const uint64_t build_bytes = build.run();
-  build.release_centroids();
+  SahBuild build(triangles, config);
+  const uint64_t build_bytes = build.run() + triangles.size() * sizeof(uint32_t);
+  build.take_order(result.order);
   const std::vector<BvhNode>& nodes = build.nodes();
   result.nodes.assign(nodes.begin(), nodes.end());
   const uint64_t copy_bytes = result.order.capacity() * sizeof(uint32_t) +
