@@ -80,12 +80,15 @@ class SahBuild {
   // The end of the left half of `task` after splitting it; halves gets the
   // two halves' boxes.
   uint32_t partition(const Task& task, const BinnedSplit& split, const Aabb& centroid_bounds,
-                     const BinScale& scale, HalfBounds& halves);
+                     HalfBounds& halves);
 
   std::span<const Triangle> triangles_;
   const BinnedSahBuilder::Config& config_;
   const uint32_t bins_;
   std::vector<PrimRef> prims_;
+  // Position j's bin on each axis (a byte each, x lowest) from the last
+  // binning of the node holding j.
+  std::vector<uint32_t> bins_of_prim_;
   std::vector<BvhNode> nodes_;
   std::vector<Box4> bin_boxes_;
   std::vector<uint32_t> bin_counts_;
@@ -96,6 +99,7 @@ class SahBuild {
 uint64_t SahBuild::run() {
   const uint32_t n = static_cast<uint32_t>(triangles_.size());
   prims_.resize(n);
+  bins_of_prim_.resize(n);
   Task root{0, 0, n, 1, {}, {}};
   for (uint32_t k = 0; k < n; ++k) {
     const Aabb b = triangles_[k].bounds();
@@ -110,8 +114,9 @@ uint64_t SahBuild::run() {
   }
   nodes_.reserve(2 * uint64_t{n} - 1);
   nodes_.emplace_back();
-  const uint64_t build_bytes =
-      prims_.capacity() * sizeof(PrimRef) + nodes_.capacity() * sizeof(BvhNode) + kScratchBytes;
+  const uint64_t build_bytes = prims_.capacity() * sizeof(PrimRef) +
+                               bins_of_prim_.capacity() * sizeof(uint32_t) +
+                               nodes_.capacity() * sizeof(BvhNode) + kScratchBytes;
   bin_boxes_.resize(3 * bins_);
   bin_counts_.resize(3 * bins_);
   right_cost_.resize(bins_);
@@ -129,6 +134,7 @@ void SahBuild::take_order(std::vector<uint32_t>& order) {
   order.resize(prims_.size());
   for (std::size_t j = 0; j < prims_.size(); ++j) order[j] = prims_[j].index();
   prims_ = {};
+  bins_of_prim_ = {};
 }
 
 void SahBuild::build_node(const Task& task) {
@@ -156,7 +162,7 @@ void SahBuild::build_node(const Task& task) {
     return;
   }
   HalfBounds halves;
-  const uint32_t mid = partition(task, best, centroid_bounds, scale, halves);
+  const uint32_t mid = partition(task, best, centroid_bounds, halves);
   assert(mid > task.begin && mid < task.end);
   const uint32_t child = static_cast<uint32_t>(nodes_.size());
   node.index = child;
@@ -183,8 +189,12 @@ BinnedSplit SahBuild::best_binned_split(const Task& task, const Aabb& bounds, co
     // max(x, 0) returns 0 for a NaN x, as std::max(0.0f, x) does.
     const __m128 x =
         _mm_min_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(_mm_load_ps(p.centroid), lo), factor), zero), last);
+    const __m128i own = _mm_cvttps_epi32(x);
+    // Kept for the partition, which then needs no bin_of of its own.
+    bins_of_prim_[j] =
+        static_cast<uint32_t>(_mm_cvtsi128_si32(_mm_packus_epi16(_mm_packus_epi32(own, own), own)));
     alignas(16) int32_t bin[4];
-    _mm_store_si128(reinterpret_cast<__m128i*>(bin), _mm_add_epi32(_mm_cvttps_epi32(x), offsets));
+    _mm_store_si128(reinterpret_cast<__m128i*>(bin), _mm_add_epi32(own, offsets));
     const __m128 box_lo = _mm_load_ps(p.lo), box_hi = _mm_load_ps(p.hi);
     for (int a = 0; a < 3; ++a) {
       boxes[bin[a]].extend(box_lo, box_hi);
@@ -196,16 +206,28 @@ BinnedSplit SahBuild::best_binned_split(const Task& task, const Aabb& bounds, co
 }
 
 uint32_t SahBuild::partition(const Task& task, const BinnedSplit& split, const Aabb& centroid_bounds,
-                             const BinScale& scale, HalfBounds& halves) {
+                             HalfBounds& halves) {
   if (split.axis >= 0) {
-    const int axis = split.axis;
-    const auto goes_left = [&](const PrimRef& p) { return scale.bin_of(p.centroid[axis], axis) < split.bin; };
+    // The bins the split was chosen from give each half's box exactly (the
+    // same min and max of the same triangles' boxes); the centroid boxes are
+    // gathered while partitioning.
+    const Box4* boxes = bin_boxes_.data() + split.axis * bins_;
+    for (uint32_t b = 0; b < bins_; ++b) halves.bounds[b < split.bin ? 0 : 1].extend(boxes[b]);
+    const int shift = 8 * split.axis;
+    const auto goes_left = [&](uint32_t j) { return (bins_of_prim_[j] >> shift & 0xffu) < split.bin; };
+    const auto add_centroid = [&](int half, const PrimRef& p) {
+      const __m128 c = _mm_load_ps(p.centroid);
+      halves.centroids[half].extend(c, c);
+    };
     uint32_t i = task.begin, j = task.end;
     while (true) {
-      while (i < j && goes_left(prims_[i])) halves.add(0, prims_[i++]);
-      while (i < j && !goes_left(prims_[j - 1])) halves.add(1, prims_[--j]);
+      while (i < j && goes_left(i)) add_centroid(0, prims_[i++]);
+      while (i < j && !goes_left(j - 1)) add_centroid(1, prims_[--j]);
       if (i == j) return i;
+      // prims_[i] goes right and prims_[j - 1] left: swapped, both are placed.
       std::swap(prims_[i], prims_[j - 1]);
+      add_centroid(0, prims_[i++]);
+      add_centroid(1, prims_[--j]);
     }
   }
   // Object median along the widest centroid spread (index order when the
@@ -242,10 +264,10 @@ Status BinnedSahBuilder::Config::validate() const {
 }
 
 uint64_t BinnedSahBuilder::peak_bytes_bound(uint64_t n) {
-  // The references + nodes reserved for a full binary tree (2n - 1), then the
-  // order beside them, then order + that + the exact copy (again at most
+  // The references and their bins + nodes reserved for a full binary tree
+  // (2n - 1), then the order beside them, then order + that + the exact copy (again at most
   // 2n - 1 nodes).
-  return kScratchBytes + n * (sizeof(PrimRef) + sizeof(uint32_t)) + 4 * n * sizeof(BvhNode);
+  return kScratchBytes + n * (sizeof(PrimRef) + 2 * sizeof(uint32_t)) + 4 * n * sizeof(BvhNode);
 }
 
 BinnedSahBuilder::Result BinnedSahBuilder::build(std::span<const Triangle> triangles, const Config& config) {
