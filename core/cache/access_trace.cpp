@@ -90,9 +90,10 @@ void AccessTraceWriter::write_locked(const std::vector<AccessRecord>& chunk) {
       for (const uint32_t b : r.hint) std::fprintf(file_, " %u", b);
       std::fputc('\n', file_);
     }
-    std::fprintf(file_, "%llu,%u,%llu,%llu,%.17g,%s,%s,%llu\n", static_cast<unsigned long long>(r.seq), r.brick,
-                 static_cast<unsigned long long>(r.bytes), static_cast<unsigned long long>(r.reserved_bytes),
-                 r.build_seconds, access_outcome_name(r.outcome), r.structure.c_str(),
+    std::fprintf(file_, "%llu,%u,%llu,%llu,%.17g,%s,%s,%llu\n", static_cast<unsigned long long>(r.seq),
+                 r.brick, static_cast<unsigned long long>(r.bytes),
+                 static_cast<unsigned long long>(r.reserved_bytes), r.build_seconds,
+                 access_outcome_name(r.outcome), r.structure.c_str(),
                  static_cast<unsigned long long>(r.rays));
   }
   written_ += chunk.size();

@@ -20,7 +20,8 @@ bool saves_bricks(const std::string& brick_accel) {
 void add_subtree_options(CLI::App& command, SubtreeCliOptions& options) {
   command.add_option("--subtree-dir", options.dir,
                      "Save built bricks to this directory and load them from it on later misses instead of "
-                     "building (--brick-accel bvh, kdtree, bsp, grid, hgrid, octree, quadtree or auto; docs/CACHE_TUNING.md)");
+                     "building (--brick-accel bvh, kdtree, bsp, grid, hgrid, octree, quadtree or auto; "
+                     "docs/CACHE_TUNING.md)");
   command
       .add_option("--subtree-dir-mb", options.dir_mb,
                   "Most MiB of brick files kept in --subtree-dir, least recently used deleted first (0: "

@@ -27,10 +27,10 @@ void finish_batch_stats(BatchTally& tally, const BrickCache& cache, const CacheC
   const CacheCounters after = cache.counters();
   stats.brick_builds = after.builds - before.builds;
   stats.brick_rebuilds = after.rebuilds - before.rebuilds;
-#define OUTCORE_SET_STRUCTURE_BUILDS(type, name, object, key, ...)                   \
-  {                                                                                  \
-    const std::size_t structure = brick_structure_index(key);                        \
-    if (structure < kMaxBrickStructures)                                             \
+#define OUTCORE_SET_STRUCTURE_BUILDS(type, name, object, key, ...)                               \
+  {                                                                                              \
+    const std::size_t structure = brick_structure_index(key);                                    \
+    if (structure < kMaxBrickStructures)                                                         \
       stats.name = after.builds_by_structure[structure] - before.builds_by_structure[structure]; \
   }
   OUTCORE_STRUCTURE_BUILDS(OUTCORE_SET_STRUCTURE_BUILDS)

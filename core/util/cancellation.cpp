@@ -21,8 +21,14 @@ void install_cancel_signal_handlers() {
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
 }
-bool cancel_requested() { return g_cancel.load(std::memory_order_relaxed); }
-void request_cancel() { g_cancel.store(true); }
-void reset_cancel() { g_cancel.store(false); }
+bool cancel_requested() {
+  return g_cancel.load(std::memory_order_relaxed);
+}
+void request_cancel() {
+  g_cancel.store(true);
+}
+void reset_cancel() {
+  g_cancel.store(false);
+}
 
 }  // namespace outcore

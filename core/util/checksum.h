@@ -11,7 +11,9 @@
 
 namespace outcore {
 
-inline uint64_t checksum64(const void* data, std::size_t bytes) { return XXH3_64bits(data, bytes); }
+inline uint64_t checksum64(const void* data, std::size_t bytes) {
+  return XXH3_64bits(data, bytes);
+}
 
 // Incremental form for data written in pieces; gives the same value as
 // checksum64() over the concatenation.

@@ -15,17 +15,17 @@ namespace outcore {
 
 enum class StatusCode {
   kOk = 0,
-  kInvalidArgument,    // the user's input or option is wrong
-  kNotFound,           // a named file, brick or generator does not exist
-  kAlreadyExists,      // the output exists and would be overwritten
-  kDataLoss,           // stored data is truncated or altered (checksum)
-  kFailedPrecondition, // e.g. a store of another format version
-  kResourceExhausted,  // a budget would be exceeded
-  kOutOfRange,         // an index or size beyond what the format allows
-  kPermissionDenied,   // the caller may not use what it named
-  kCancelled,          // interrupted by the user
-  kIoError,            // the operating system refused a read or write
-  kInternal,           // a broken invariant; a bug in Outcore
+  kInvalidArgument,     // the user's input or option is wrong
+  kNotFound,            // a named file, brick or generator does not exist
+  kAlreadyExists,       // the output exists and would be overwritten
+  kDataLoss,            // stored data is truncated or altered (checksum)
+  kFailedPrecondition,  // e.g. a store of another format version
+  kResourceExhausted,   // a budget would be exceeded
+  kOutOfRange,          // an index or size beyond what the format allows
+  kPermissionDenied,    // the caller may not use what it named
+  kCancelled,           // interrupted by the user
+  kIoError,             // the operating system refused a read or write
+  kInternal,            // a broken invariant; a bug in Outcore
 };
 
 const char* status_code_name(StatusCode code);
@@ -54,17 +54,39 @@ class [[nodiscard]] Status {
   std::string message_;
 };
 
-inline Status invalid_argument(std::string m) { return {StatusCode::kInvalidArgument, std::move(m)}; }
-inline Status not_found(std::string m) { return {StatusCode::kNotFound, std::move(m)}; }
-inline Status already_exists(std::string m) { return {StatusCode::kAlreadyExists, std::move(m)}; }
-inline Status data_loss(std::string m) { return {StatusCode::kDataLoss, std::move(m)}; }
-inline Status failed_precondition(std::string m) { return {StatusCode::kFailedPrecondition, std::move(m)}; }
-inline Status resource_exhausted(std::string m) { return {StatusCode::kResourceExhausted, std::move(m)}; }
-inline Status out_of_range(std::string m) { return {StatusCode::kOutOfRange, std::move(m)}; }
-inline Status permission_denied(std::string m) { return {StatusCode::kPermissionDenied, std::move(m)}; }
-inline Status cancelled(std::string m) { return {StatusCode::kCancelled, std::move(m)}; }
-inline Status io_error(std::string m) { return {StatusCode::kIoError, std::move(m)}; }
-inline Status internal_error(std::string m) { return {StatusCode::kInternal, std::move(m)}; }
+inline Status invalid_argument(std::string m) {
+  return {StatusCode::kInvalidArgument, std::move(m)};
+}
+inline Status not_found(std::string m) {
+  return {StatusCode::kNotFound, std::move(m)};
+}
+inline Status already_exists(std::string m) {
+  return {StatusCode::kAlreadyExists, std::move(m)};
+}
+inline Status data_loss(std::string m) {
+  return {StatusCode::kDataLoss, std::move(m)};
+}
+inline Status failed_precondition(std::string m) {
+  return {StatusCode::kFailedPrecondition, std::move(m)};
+}
+inline Status resource_exhausted(std::string m) {
+  return {StatusCode::kResourceExhausted, std::move(m)};
+}
+inline Status out_of_range(std::string m) {
+  return {StatusCode::kOutOfRange, std::move(m)};
+}
+inline Status permission_denied(std::string m) {
+  return {StatusCode::kPermissionDenied, std::move(m)};
+}
+inline Status cancelled(std::string m) {
+  return {StatusCode::kCancelled, std::move(m)};
+}
+inline Status io_error(std::string m) {
+  return {StatusCode::kIoError, std::move(m)};
+}
+inline Status internal_error(std::string m) {
+  return {StatusCode::kInternal, std::move(m)};
+}
 
 // "path: strerror(errno)" for the current errno.
 Status io_error_from_errno(const std::string& what);
@@ -75,7 +97,7 @@ class [[nodiscard]] Expected {
   static_assert(!std::is_same_v<T, Status>);
 
  public:
-  Expected(T value) : storage_(std::move(value)) {}  // NOLINT(implicit)
+  Expected(T value) : storage_(std::move(value)) {}        // NOLINT(implicit)
   Expected(Status status) : storage_(std::move(status)) {  // NOLINT(implicit)
     assert(!std::get<Status>(storage_).ok() && "Expected built from an OK status");
   }
@@ -113,9 +135,9 @@ class [[nodiscard]] Expected {
 #define OUTCORE_CONCAT_INNER(a, b) a##b
 #define OUTCORE_CONCAT(a, b) OUTCORE_CONCAT_INNER(a, b)
 
-#define OUTCORE_RETURN_IF_ERROR(expr)            \
-  do {                                           \
-    ::outcore::Status outcore_status_ = (expr);  \
+#define OUTCORE_RETURN_IF_ERROR(expr)                  \
+  do {                                                 \
+    ::outcore::Status outcore_status_ = (expr);        \
     if (!outcore_status_.ok()) return outcore_status_; \
   } while (0)
 
