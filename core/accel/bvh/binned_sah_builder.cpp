@@ -39,7 +39,9 @@ struct alignas(16) PrimRef {
 };
 static_assert(sizeof(PrimRef) == 48);
 
-// Two runs' boxes and centroid boxes, gathered while partitioning.
+// The two halves' boxes and centroid boxes of a split node: for a binned
+// split the boxes come from the bins and the centroid boxes from the
+// partition; for a median split both from a pass over each half (add).
 struct HalfBounds {
   Box4 bounds[2], centroids[2];
 
