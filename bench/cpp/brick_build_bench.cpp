@@ -38,20 +38,12 @@ double median(std::vector<double> v) {
 // the reason when it cannot be read.
 BrickData load(const std::string& spec) {
   BrickData brick;
-  auto source = open_triangle_source(spec);
-  if (!source.ok()) {
-    std::fprintf(stderr, "outcore_brick_build_bench: %s\n", source.status().to_string().c_str());
+  auto triangles = read_all_triangles(spec);
+  if (!triangles.ok()) {
+    std::fprintf(stderr, "outcore_brick_build_bench: %s\n", triangles.status().to_string().c_str());
     std::exit(1);
   }
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    brick.triangles.insert(brick.triangles.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  const Status status = (*source)->stream(sink);
-  if (!status.ok()) {
-    std::fprintf(stderr, "outcore_brick_build_bench: %s\n", status.to_string().c_str());
-    std::exit(1);
-  }
+  brick.triangles = std::move(*triangles);
   for (uint32_t k = 0; k < brick.triangles.size(); ++k) brick.ids.push_back({0, k});
   return brick;
 }

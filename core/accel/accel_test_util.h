@@ -22,15 +22,10 @@ namespace outcore::accel_test {
 // All triangles of an input (file or gen: spec) as one brick, ids (geometry_id, k).
 inline BrickData load_brick_from(const std::string& spec, uint32_t geometry_id = 0) {
   BrickData brick;
-  auto source = open_triangle_source(spec);
-  EXPECT_TRUE(source.ok()) << spec << ": " << source.status().to_string();
-  if (!source.ok()) return brick;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    brick.triangles.insert(brick.triangles.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  const Status status = (*source)->stream(sink);
-  EXPECT_TRUE(status.ok()) << spec << ": " << status.to_string();
+  auto triangles = read_all_triangles(spec);
+  EXPECT_TRUE(triangles.ok()) << spec << ": " << triangles.status().to_string();
+  if (!triangles.ok()) return brick;
+  brick.triangles = std::move(*triangles);
   for (uint32_t k = 0; k < brick.triangles.size(); ++k) brick.ids.push_back({geometry_id, k});
   return brick;
 }

@@ -17,17 +17,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-Expected<std::vector<Triangle>> load_triangles(const std::string& spec) {
-  OUTCORE_ASSIGN_OR_RETURN(auto source, open_triangle_source(spec));
-  std::vector<Triangle> out;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    out.insert(out.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  OUTCORE_RETURN_IF_ERROR(source->stream(sink));
-  return out;
-}
-
 std::vector<TriangleId> sequential_ids(std::size_t n) {
   std::vector<TriangleId> ids(n);
   for (uint32_t k = 0; k < n; ++k) ids[k] = {0, k};
@@ -401,7 +390,7 @@ Status add_seam_scenes(StressScenes& out, bool quick, uint32_t stride) {
     StressScene s;
     s.name = name;
     s.family = "seam";
-    OUTCORE_ASSIGN_OR_RETURN(s.triangles, load_triangles(spec));
+    OUTCORE_ASSIGN_OR_RETURN(s.triangles, read_all_triangles(spec));
     s.ids = sequential_ids(s.triangles.size());
     const bool torus = spec.find("torus") != std::string::npos;
     Vec3f origin;
@@ -451,9 +440,9 @@ Expected<StressScenes> make_stress_scenes(const StressOptions& options) {
   StressScenes out;
   const uint32_t stride = std::max(1u, options.stride);
   OUTCORE_ASSIGN_OR_RETURN(auto sphere,
-                           load_triangles(options.quick ? "gen:sphere?level=3" : "gen:sphere?level=4"));
-  OUTCORE_ASSIGN_OR_RETURN(auto torus,
-                           load_triangles(options.quick ? "gen:torus?nu=48&nv=24" : "gen:torus?nu=96&nv=48"));
+                           read_all_triangles(options.quick ? "gen:sphere?level=3" : "gen:sphere?level=4"));
+  OUTCORE_ASSIGN_OR_RETURN(
+      auto torus, read_all_triangles(options.quick ? "gen:torus?nu=48&nv=24" : "gen:torus?nu=96&nv=48"));
   // The icosphere is centred on the origin; the torus's core circle has radius
   // 1 (its default major radius) about the z axis.
   add_closed_mesh(out, "sphere", sphere, Vec3f(0, 0, 0), stride);
@@ -465,7 +454,7 @@ Expected<StressScenes> make_stress_scenes(const StressOptions& options) {
         out.notes.push_back(std::string(model) + ": " + path.string() + " not found; skipped");
         continue;
       }
-      OUTCORE_ASSIGN_OR_RETURN(auto tris, load_triangles(path.string()));
+      OUTCORE_ASSIGN_OR_RETURN(auto tris, read_all_triangles(path.string()));
       add_closed_mesh(out, model, normalised(std::move(tris)), std::nullopt, stride);
     }
   }
