@@ -42,7 +42,7 @@ TEST(CityGenerator, TrianglesAreCopyMajorTransformsOfTheBase) {
   ASSERT_EQ(city->base().triangle_count(), base.size());
   for (std::size_t k = 0; k < base.size(); ++k) ASSERT_EQ(city->base().triangle(k), base[k]);
   EXPECT_EQ(city->base().vertices.size(), 42u);  // welded: V = T/2 + 2 for a closed genus-0 mesh
-  const auto tris = gen_test::collect(*city);
+  const auto tris = read_all(*city);
   ASSERT_TRUE(tris.ok());
   ASSERT_EQ(tris->size(), 7 * base.size());
   for (int64_t c = 0; c < 7; ++c) {
@@ -92,7 +92,7 @@ TEST(CityGenerator, TiltTurnsTheWholeCityAboutX) {
 TEST(CityGenerator, CopiesDifferAndAreSpreadOnAGrid) {
   auto city = make_city("gen:city?of=(gen:sphere?level=2)&copies=50&seed=5");
   ASSERT_NE(city, nullptr);
-  const auto tris = gen_test::collect(*city);
+  const auto tris = read_all(*city);
   ASSERT_TRUE(tris.ok());
   const std::size_t b = city->base().triangle_count();
   std::set<float> scales, centres_x, centres_z;
@@ -152,7 +152,7 @@ TEST(CityGenerator, BaseFromAFile) {
   EXPECT_EQ(city->base().triangle(1), (Triangle{{0, 0, 0}, {1, 1, 0}, {0, 1, 0}}));
   EXPECT_EQ(city->triangle_count(), 10u);
   EXPECT_EQ(city->cell_size(), 2.5 * std::sqrt(2.0));
-  EXPECT_EQ(gen_test::collect(*city)->size(), 10u);
+  EXPECT_EQ(read_all(*city)->size(), 10u);
   std::filesystem::remove(path);
 }
 

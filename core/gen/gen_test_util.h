@@ -1,6 +1,6 @@
 // Test helpers for the generator tests (core/gen/*_test.cpp; the file reader
-// tests use collect() too): collect a source's triangles, check closed and consistently oriented meshes, a
-// sink that fails on purpose.
+// tests use them too): a spec's triangles, checks of closed and consistently
+// oriented meshes, a sink that fails on purpose.
 //
 // Thread-safety: plain functions and test-local objects.
 #pragma once
@@ -19,21 +19,11 @@
 
 namespace outcore::gen_test {
 
-inline Expected<std::vector<Triangle>> collect(TriangleSource& source) {
-  std::vector<Triangle> out;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    out.insert(out.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  OUTCORE_RETURN_IF_ERROR(source.stream(sink));
-  return out;
-}
-
 inline std::vector<Triangle> collect_spec(const std::string& spec) {
   auto source = make_generator(spec);
   EXPECT_TRUE(source.ok()) << spec << ": " << source.status().to_string();
   if (!source.ok()) return {};
-  auto tris = collect(**source);
+  auto tris = read_all(**source);
   EXPECT_TRUE(tris.ok()) << spec << ": " << tris.status().to_string();
   return tris.ok() ? std::move(tris).value() : std::vector<Triangle>{};
 }
@@ -99,8 +89,8 @@ inline void expect_restreamable_and_sink_errors_propagate(const std::string& spe
   SCOPED_TRACE(spec);
   auto source = make_generator(spec);
   ASSERT_TRUE(source.ok()) << source.status().to_string();
-  auto first = collect(**source);
-  auto second = collect(**source);
+  auto first = read_all(**source);
+  auto second = read_all(**source);
   ASSERT_TRUE(first.ok() && second.ok());
   EXPECT_EQ(*first, *second);
   ASSERT_GT(first->size(), 2 * TriangleBatcher::kBatchSize) << "need at least 3 batches for the sink test";

@@ -35,7 +35,7 @@ TEST(GeneratorRanges, ConcatenatedRangesAreBitIdenticalToTheWholeStreamForEveryG
     auto g = make_typed_generator(spec);
     ASSERT_TRUE(g.ok()) << g.status().to_string();
     const Generator& gen = **g;
-    const auto whole = gen_test::collect(**g);
+    const auto whole = read_all(**g);
     ASSERT_TRUE(whole.ok());
     const uint64_t n = gen.triangle_count();
     ASSERT_EQ(whole->size(), n);
@@ -109,7 +109,7 @@ TEST(GeneratorFactory, ReachableThroughOpenTriangleSource) {
   auto source = open_triangle_source("gen:sphere?level=1");
   ASSERT_TRUE(source.ok()) << source.status().to_string();
   EXPECT_EQ((*source)->description(), "gen:sphere?level=1");
-  auto tris = gen_test::collect(**source);
+  auto tris = read_all(**source);
   ASSERT_TRUE(tris.ok());
   EXPECT_EQ(tris->size(), 80u);
 }

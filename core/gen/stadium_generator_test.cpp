@@ -25,7 +25,7 @@ TEST(StadiumGenerator, TinyObjectInAHugeEnclosure) {
   ASSERT_TRUE(parsed.ok());
   auto g = StadiumGenerator::create(*parsed);
   ASSERT_TRUE(g.ok());
-  const auto tris = gen_test::collect(**g);
+  const auto tris = read_all(**g);
   ASSERT_TRUE(tris.ok());
   const std::size_t enclosure = (*g)->enclosure_triangle_count();
   ASSERT_EQ(tris->size(), enclosure + 5120);

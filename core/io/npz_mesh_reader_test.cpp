@@ -52,9 +52,9 @@ std::vector<Triangle> read_all(const std::string& bytes, const std::string& name
   auto source = decode_npz_mesh(bytes, name);
   EXPECT_TRUE(source.ok()) << source.status().to_string();
   if (!source.ok()) return {};
-  auto first = gen_test::collect(**source);
+  auto first = read_all(**source);
   EXPECT_TRUE(first.ok()) << first.status().to_string();
-  auto second = gen_test::collect(**source);
+  auto second = read_all(**source);
   EXPECT_TRUE(second.ok() && first.ok() && *first == *second) << "a second stream() differs";
   return first.ok() ? *first : std::vector<Triangle>{};
 }
@@ -212,7 +212,7 @@ TEST(NpzMeshReader, FilesAreOpenedByExtensionAndOnlyWhenRegular) {
   auto source = open_triangle_file(path);
   ASSERT_TRUE(source.ok()) << source.status().to_string();
   EXPECT_EQ((*source)->description(), path);
-  const auto got = gen_test::collect(**source);
+  const auto got = read_all(**source);
   ASSERT_TRUE(got.ok()) << got.status().to_string();
   EXPECT_EQ(*got, square_triangles());
 

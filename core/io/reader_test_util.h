@@ -36,9 +36,9 @@ inline bool same_bits(const std::vector<Triangle>& a, const std::vector<Triangle
 inline Expected<std::vector<Triangle>> read_one_way(OpenFileFn open, const std::string& path,
                                                     const SourceOptions& options, bool restream) {
   OUTCORE_ASSIGN_OR_RETURN(std::unique_ptr<TriangleSource> source, open(path, options));
-  auto first = gen_test::collect(*source);
+  auto first = read_all(*source);
   if (first.ok() && restream) {
-    auto second = gen_test::collect(*source);
+    auto second = read_all(*source);
     EXPECT_TRUE(second.ok()) << second.status().to_string();
     if (second.ok()) {
       EXPECT_TRUE(same_bits(*first, *second)) << path << ": a second stream() differs";
@@ -86,7 +86,7 @@ inline Status read_out_of_core_status(OpenFileFn open, const std::string& path) 
   TempDir spill_dir;
   auto source = open(path, {kSpillEveryVertex, spill_dir.path()});
   if (!source.ok()) return source.status();
-  const Status status = gen_test::collect(**source).status();
+  const Status status = read_all(**source).status();
   if (!status.ok()) {
     EXPECT_TRUE(std::filesystem::is_empty(spill_dir.path())) << "temporary files left behind";
   }

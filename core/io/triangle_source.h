@@ -19,6 +19,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "core/geometry/triangle.h"
 #include "core/util/status.h"
@@ -99,6 +100,18 @@ class CallbackSink final : public TriangleSink {
  private:
   Fn fn_;
 };
+
+// Every triangle `source` streams, in memory: for inputs known to be small
+// (tests, stress scenes, benchmarks).
+inline Expected<std::vector<Triangle>> read_all(TriangleSource& source) {
+  std::vector<Triangle> out;
+  CallbackSink sink([&](std::span<const Triangle> batch) {
+    out.insert(out.end(), batch.begin(), batch.end());
+    return Status::Ok();
+  });
+  OUTCORE_RETURN_IF_ERROR(source.stream(sink));
+  return out;
+}
 
 // Collects triangles into fixed-size batches for a sink; sources call add() per
 // triangle and finish() at the end.

@@ -19,13 +19,7 @@ Expected<std::unique_ptr<TriangleSource>> open_triangle_source(const std::string
 
 Expected<std::vector<Triangle>> read_all_triangles(const std::string& spec) {
   OUTCORE_ASSIGN_OR_RETURN(auto source, open_triangle_source(spec));
-  std::vector<Triangle> out;
-  CallbackSink sink([&](std::span<const Triangle> batch) {
-    out.insert(out.end(), batch.begin(), batch.end());
-    return Status::Ok();
-  });
-  OUTCORE_RETURN_IF_ERROR(source->stream(sink));
-  return out;
+  return read_all(*source);
 }
 
 }  // namespace outcore
