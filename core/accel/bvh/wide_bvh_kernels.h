@@ -496,16 +496,6 @@ class AnyHitSearch {
 };
 
 template <class V, class Lanes>
-void intersect_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
-  for (const uint32_t i : ray_ids) {
-    ClosestHitSearch<V, Lanes> search(rays[i], hits[i]);
-    if (!search.active()) continue;
-    search.search(tree);
-    search.finish();
-  }
-}
-
-template <class V, class Lanes>
 void occluded_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
                    uint8_t* occluded) {
   for (const uint32_t i : ray_ids) {

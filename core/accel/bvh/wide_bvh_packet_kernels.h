@@ -32,6 +32,7 @@
 #include <limits>
 
 #include "core/accel/bvh/wide_bvh_kernels.h"
+#include "core/accel/bvh/wide_bvh_stepped_kernels.h"
 
 namespace outcore::wide_kernels {
 
@@ -455,17 +456,35 @@ inline uint32_t packet_run(std::span<const uint32_t> ray_ids, std::size_t start,
 }
 
 // Closest hits with the watertight test: packets where rays form runs of at
-// least half a packet, single rays elsewhere; over one tree (a set of one,
-// without top level) or a brick set.
-template <class V>
+// least half a packet, single rays elsewhere, gathered and walked kWalks at a
+// time when the set is one tree (wide_bvh_stepped_kernels.h); over one tree
+// (a set of one, without top level) or a brick set.
+template <class V, int kWalks>
 void intersect_watertight_coherent(const WideBvhSetView& set, std::span<const uint32_t> ray_ids,
                                    const Ray* rays, Hit* hits) {
   constexpr uint32_t kWidth = V::kWidth;
+  constexpr uint32_t kGathered = 64;
+  std::array<uint32_t, kGathered> singles;
+  uint32_t single_count = 0;
+  const auto trace_singles = [&] {
+    const std::span<const uint32_t> ids(singles.data(), single_count);
+    if (set.trees.size() == 1) {
+      intersect_rays<V, WatertightLanes<V>, kWalks>(set.trees[0], ids, rays, hits);
+    } else {
+      intersect_set<V, WatertightLanes<V>>(set, ids, rays, hits);
+    }
+    single_count = 0;
+  };
   std::size_t i = 0;
   while (i < ray_ids.size()) {
     const uint32_t run = packet_run<kWidth>(ray_ids, i, rays);
-    if (run * 2 < kWidth) {
+    if (run * 2 < kWidth && kWalks == 1) {
       intersect_set<V, WatertightLanes<V>>(set, ray_ids.subspan(i, run), rays, hits);
+    } else if (run * 2 < kWidth) {
+      for (uint32_t k = 0; k < run; ++k) {
+        singles[single_count++] = ray_ids[i + k];
+        if (single_count == kGathered) trace_singles();
+      }
     } else {
       WatertightPacket<V> packet(rays, ray_ids.data() + i, run, hits);
       packet.trace_set(set);
@@ -473,6 +492,7 @@ void intersect_watertight_coherent(const WideBvhSetView& set, std::span<const ui
     }
     i += run;
   }
+  if (single_count > 0) trace_singles();
 }
 
 }  // namespace outcore::wide_kernels

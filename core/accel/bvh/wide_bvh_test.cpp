@@ -240,6 +240,50 @@ TEST(WideBvh, CameraRunsTracedAsPacketsMatchTheScalarReference) {
   expect_paths_match_reference("sphere from inside", build_trees(sphere), inside, inside.size() / 2);
 }
 
+// The single-ray walks of one call are interleaved (wide_bvh_stepped_kernels.h):
+// each ray's answer must not depend on which rays share the call. Lists of
+// every length up to a few walks, a ray listed twice, rays whose earlier hit
+// is already nearer than anything here (no walk) between rays that walk,
+// and camera runs (packets) between single rays, against the ray traced
+// alone, on every path and test.
+TEST(WideBvh, InterleavedWalksAnswerEachRayAsIfTracedAlone) {
+  const BrickData bunny = load_brick_from(accel_test::bunny_path());
+  const Trees trees = build_trees(bunny);
+  std::vector<Ray> rays = mixed_rays(bunny, 120, 31);
+  const std::vector<Ray> camera = camera_rays(bunny, 6, Vec3f(0, 0, 2 * length(bounds_of(bunny).extent())));
+  rays.insert(rays.begin() + 40, camera.begin(), camera.begin() + 20);
+  std::vector<Hit> earlier(rays.size());
+  for (std::size_t i = 0; i < rays.size(); i += 5) earlier[i].t = 1e-30f;  // answered: nothing nearer here
+  for (const SimdPath path : supported_paths()) {
+    for (const TriangleTest test : kAllTriangleTests) {
+      const std::string name =
+          std::string(triangle_test_name(test)) + " " + std::string(simd_path_name(path));
+      std::vector<Hit> alone = earlier;
+      for (uint32_t i = 0; i < rays.size(); ++i) {
+        wide_bvh_intersect(path, test, trees.wide.view(), std::span<const uint32_t>(&i, 1), rays.data(),
+                           alone.data());
+      }
+      const std::size_t hits =
+          std::count_if(alone.begin(), alone.end(), [](const Hit& h) { return h.is_hit(); });
+      EXPECT_GE(hits, rays.size() / 4) << name;
+      for (std::size_t count = 1; count <= 9; ++count) {
+        for (std::size_t first = 0; first + count <= rays.size(); first += count) {
+          std::vector<uint32_t> ids(count);
+          for (std::size_t k = 0; k < count; ++k) ids[k] = static_cast<uint32_t>(first + k);
+          if (count >= 3) ids[count - 1] = ids[0];  // listed twice
+          std::vector<Hit> got = earlier;
+          wide_bvh_intersect(path, test, trees.wide.view(), ids, rays.data(), got.data());
+          for (const uint32_t i : ids) {
+            ASSERT_EQ(std::memcmp(&got[i], &alone[i], sizeof(Hit)), 0)
+                << name << " ray " << i << " in a list of " << count << " from " << first << ": t "
+                << got[i].t << " vs " << alone[i].t;
+          }
+        }
+      }
+    }
+  }
+}
+
 // Packets culled by their whole-packet bounds (interval and slope) and
 // packets whose large boxes skip the lane-by-lane test must still find every
 // vertex and edge hit: runs of eight rays from one interior point, each run
