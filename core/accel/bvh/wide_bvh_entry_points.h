@@ -20,11 +20,11 @@ namespace outcore::wide_kernels {
 
 // Single-ray walks interleaved per call (wide_bvh_stepped_kernels.h): three
 // for one brick's tree, reached by the queued strategy's brick visits, each
-// of which starts cold in the brick; none for a brick set, whose trees the
-// chunked strategies keep warm (two were even on the bunny, three ~8 %
-// slower).
+// of which starts cold in the brick; two for a brick set of one tree, which
+// the chunked strategies keep warm (bunny, incoherent: two 0.98x the time
+// of one, three ~1.08x).
 inline constexpr int kTreeWalks = 3;
-inline constexpr int kSetWalks = 1;
+inline constexpr int kSetWalks = 2;
 
 // Calls fn.template operator()<Lanes>() with the lane test of `test`.
 template <class V, class Fn>
