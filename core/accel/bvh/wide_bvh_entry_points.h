@@ -50,7 +50,8 @@ void intersect_tree(TriangleTest test, const WideBvhView& tree, std::span<const 
 template <class V>
 void occluded_tree(TriangleTest test, const WideBvhView& tree, std::span<const uint32_t> ray_ids,
                    const Ray* rays, uint8_t* occluded) {
-  with_lanes<V>(test, [&]<class Lanes>() { occluded_rays<V, Lanes>(tree, ray_ids, rays, occluded); });
+  with_lanes<V>(test,
+                [&]<class Lanes>() { occluded_rays<V, Lanes, kTreeWalks>(tree, ray_ids, rays, occluded); });
 }
 
 template <class V>

@@ -495,16 +495,6 @@ class AnyHitSearch {
   float tmax_;
 };
 
-template <class V, class Lanes>
-void occluded_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
-                   uint8_t* occluded) {
-  for (const uint32_t i : ray_ids) {
-    if (occluded[i] != 0) continue;
-    AnyHitSearch<V, Lanes> search(rays[i]);
-    if (search.active() && search.search(tree)) occluded[i] = 1;
-  }
-}
-
 // Searches the trees of a set that the ray may enter, nearest entry first,
 // until search.search(tree) returns true; whether it did.
 template <class V, class Search>

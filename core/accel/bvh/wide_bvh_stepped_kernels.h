@@ -1,17 +1,18 @@
-// Closest hits of many rays in one wide BVH with several rays' walks
-// interleaved: each walk advances by one node or one leaf in turn. A single
+// Closest hits and occlusion of many rays in one wide BVH with several rays'
+// walks interleaved: each walk advances by one node or one leaf in turn. A single
 // ray's walk is a chain of dependent steps (fetch a node, test its boxes,
 // pick the next), bound by memory latency and branch outcomes; a second and
 // third chain give the core independent work while one waits. Measured
 // (docs/BENCHMARKS.md, issue 23): warm incoherent batches of the sparse scene
 // and the city take ~0.87-0.90x the time with three walks, where every brick
 // visit starts cold in the brick's structure; on the bunny, whose one tree
-// stays cached, two take 0.98x the time and three ~1.08x.
+// stays cached, two take 0.98x the time and three ~1.08x. Occlusion of the
+// sparse scene's incoherent rays: 0.90x with three.
 //
 // The answers are the single walk's (wide_bvh_kernels.h), bitwise: a ray's
 // steps are the same in the same order, only other rays' steps come between.
 // A ray listed twice is searched twice at once, and still answered right
-// (SteppedClosestHit::finish).
+// (SteppedWalk::finish).
 //
 // Compiled like wide_bvh_kernels.h, once per lane type.
 //
@@ -27,22 +28,25 @@
 
 namespace outcore::wide_kernels {
 
-// One ray's walk of one tree (traverse_nodes with ClosestLeafHits), one
-// step per call.
-template <class V, class Lanes>
-class SteppedClosestHit {
+// One ray's walk of one tree (traverse_nodes), one step per call: its
+// closest hit (as ClosestHitSearch), or with kAnyHit whether it hits
+// anything (as AnyHitSearch: the walk stops at the first hit).
+template <class V, class Lanes, bool kAnyHit>
+class SteppedWalk {
  public:
-  // Starts ray `ray`; false when its segment is empty (nothing to search).
+  // Starts the closest hit of `ray` over (tnear, min(tfar, best.t)]; false
+  // when that is empty (nothing to search).
   bool start(const Ray& ray, Hit& best) {
-    ray_ = &ray;
+    static_assert(!kAnyHit);
     best_ = &best;
-    box_ = BoxLanes<V>(ray);
-    lanes_.emplace(ray);
-    tmax_ = ray.tfar < best.t ? ray.tfar : best.t;
     found_packet_ = nullptr;
-    top_ = 0;
-    index_ = 0;
-    return tmax_ > ray.tnear;
+    return begin(ray, ray.tfar < best.t ? ray.tfar : best.t);
+  }
+  // Starts the occlusion test of `ray`; false for a ray already occluded.
+  bool start(const Ray& ray, uint8_t& occluded) {
+    static_assert(kAnyHit);
+    occluded_ = &occluded;
+    return occluded == 0 && begin(ray, ray.tfar);
   }
 
   // Tests one node's boxes, or one leaf; false when the walk is over.
@@ -56,8 +60,9 @@ class SteppedClosestHit {
       if (item.entry > tmax_) continue;
       if (item.triangles == 0) {
         index_ = item.ref;
-      } else {
-        test_leaf(tree.packets.data(), item.ref, item.triangles);
+      } else if (test_leaf(tree.packets.data(), item.ref, item.triangles)) {
+        top_ = 0;  // occluded: done
+        return false;
       }
       return true;
     }
@@ -67,7 +72,7 @@ class SteppedClosestHit {
   // Completes best (barycentrics, normal) when the hit this walk found is
   // still best (the same ray walked twice at once would otherwise mix two).
   void finish() {
-    if (found_packet_ == nullptr) return;
+    if (kAnyHit || found_packet_ == nullptr) return;
     if (best_->t != found_hit_.t || best_->geometry_id != found_packet_->geometry_id[found_lane_] ||
         best_->primitive_id != found_packet_->primitive_id[found_lane_]) {
       return;
@@ -113,8 +118,32 @@ class SteppedClosestHit {
     }
   }
 
-  // As ClosestHitSearch's leaf test.
-  void test_leaf(const TrianglePacket* packets, uint32_t first, uint32_t count) {
+  bool begin(const Ray& ray, float tmax) {
+    ray_ = &ray;
+    box_ = BoxLanes<V>(ray);
+    lanes_.emplace(ray);
+    tmax_ = tmax;
+    top_ = 0;
+    index_ = 0;
+    return tmax_ > ray.tnear;
+  }
+
+  // True to stop the walk: an any-hit query found its hit.
+  bool test_leaf(const TrianglePacket* packets, uint32_t first, uint32_t count) {
+    if constexpr (kAnyHit) {
+      const bool hit = for_each_lane_group<V>(
+          packets, first, count, [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
+            for (uint32_t bits = lanes_->candidates(packet, lane, valid, ray_->tnear, tmax_); bits != 0;
+                 bits &= bits - 1) {
+              TriangleHit h;
+              if (lanes_->accept(packet, lane, static_cast<uint32_t>(__builtin_ctz(bits)), h)) return true;
+            }
+            return false;
+          });
+      if (hit) *occluded_ = 1;
+      return hit;
+    }
+    // As ClosestHitSearch's leaf test; never stops the walk.
     for_each_lane_group<V>(packets, first, count,
                            [&](const TrianglePacket& packet, uint32_t lane, uint32_t valid) {
                              for (uint32_t bits = lanes_->candidates(packet, lane, valid, ray_->tnear, tmax_);
@@ -135,10 +164,12 @@ class SteppedClosestHit {
                              }
                              return false;
                            });
+    return false;
   }
 
   const Ray* ray_ = nullptr;
-  Hit* best_ = nullptr;
+  Hit* best_ = nullptr;          // closest hit
+  uint8_t* occluded_ = nullptr;  // any hit
   BoxLanes<V> box_{Ray{}};
   std::optional<Lanes> lanes_;
   float tmax_ = 0;
@@ -150,19 +181,19 @@ class SteppedClosestHit {
   std::array<Item, (kWideBvhWidth - 1) * kMaxBvhDepth + kWideBvhWidth> stack_;
 };
 
-// Closest hits of rays[ray_ids] in `tree`, kWalks walks interleaved (1: one
-// ray after the other).
-template <class V, class Lanes, int kWalks>
-void intersect_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
+// Runs the walks that start_walk(walk, i) starts for each i in ray_ids
+// (false: nothing to walk), kWalks at a time, interleaved step by step (1:
+// one ray after the other).
+template <int kWalks, class Walk, class StartWalk>
+void interleave_walks(const WideBvhView& tree, std::span<const uint32_t> ray_ids, StartWalk&& start_walk) {
   static_assert(kWalks >= 1);
   if (tree.nodes.empty()) return;
-  std::array<SteppedClosestHit<V, Lanes>, kWalks> walks;
+  std::array<Walk, kWalks> walks;
   std::array<bool, kWalks> live{};
   std::size_t next = 0;
-  const auto start_next = [&](SteppedClosestHit<V, Lanes>& walk) {
+  const auto start_next = [&](Walk& walk) {
     while (next < ray_ids.size()) {
-      const uint32_t i = ray_ids[next++];
-      if (walk.start(rays[i], hits[i])) return true;
+      if (start_walk(walk, ray_ids[next++])) return true;
     }
     return false;
   };
@@ -176,6 +207,23 @@ void intersect_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, 
       running -= !live[k];
     }
   }
+}
+
+// Closest hits of rays[ray_ids] in `tree`, kWalks walks interleaved.
+template <class V, class Lanes, int kWalks>
+void intersect_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays, Hit* hits) {
+  using Walk = SteppedWalk<V, Lanes, false>;
+  interleave_walks<kWalks, Walk>(tree, ray_ids,
+                                 [&](Walk& walk, uint32_t i) { return walk.start(rays[i], hits[i]); });
+}
+
+// Occlusion of rays[ray_ids] in `tree`, kWalks walks interleaved.
+template <class V, class Lanes, int kWalks>
+void occluded_rays(const WideBvhView& tree, std::span<const uint32_t> ray_ids, const Ray* rays,
+                   uint8_t* occluded) {
+  using Walk = SteppedWalk<V, Lanes, true>;
+  interleave_walks<kWalks, Walk>(tree, ray_ids,
+                                 [&](Walk& walk, uint32_t i) { return walk.start(rays[i], occluded[i]); });
 }
 
 }  // namespace outcore::wide_kernels

@@ -241,7 +241,8 @@ TEST(WideBvh, CameraRunsTracedAsPacketsMatchTheScalarReference) {
 }
 
 // The single-ray walks of one call are interleaved (wide_bvh_stepped_kernels.h):
-// each ray's answer must not depend on which rays share the call. Lists of
+// each ray's answer (closest hit and occlusion) must not depend on which rays
+// share the call. Lists of
 // every length up to a few walks, a ray listed twice, rays whose earlier hit
 // is already nearer than anything here (no walk) between rays that walk,
 // and camera runs (packets) between single rays, against the ray traced
@@ -259,10 +260,14 @@ TEST(WideBvh, InterleavedWalksAnswerEachRayAsIfTracedAlone) {
       const std::string name =
           std::string(triangle_test_name(test)) + " " + std::string(simd_path_name(path));
       std::vector<Hit> alone = earlier;
+      std::vector<uint8_t> alone_occluded(rays.size(), 0);
       for (uint32_t i = 0; i < rays.size(); ++i) {
-        wide_bvh_intersect(path, test, trees.wide.view(), std::span<const uint32_t>(&i, 1), rays.data(),
-                           alone.data());
+        const std::span<const uint32_t> one(&i, 1);
+        wide_bvh_intersect(path, test, trees.wide.view(), one, rays.data(), alone.data());
+        if (i % 7 == 2) alone_occluded[i] = 1;  // found occluded in an earlier brick
+        wide_bvh_occluded(path, test, trees.wide.view(), one, rays.data(), alone_occluded.data());
       }
+      EXPECT_GT(std::count(alone_occluded.begin(), alone_occluded.end(), 0), 0) << name;
       const std::size_t hits =
           std::count_if(alone.begin(), alone.end(), [](const Hit& h) { return h.is_hit(); });
       EXPECT_GE(hits, rays.size() / 4) << name;
@@ -273,10 +278,15 @@ TEST(WideBvh, InterleavedWalksAnswerEachRayAsIfTracedAlone) {
           if (count >= 3) ids[count - 1] = ids[0];  // listed twice
           std::vector<Hit> got = earlier;
           wide_bvh_intersect(path, test, trees.wide.view(), ids, rays.data(), got.data());
+          std::vector<uint8_t> occluded(rays.size(), 0);
+          for (const uint32_t i : ids) occluded[i] = i % 7 == 2;
+          wide_bvh_occluded(path, test, trees.wide.view(), ids, rays.data(), occluded.data());
           for (const uint32_t i : ids) {
             ASSERT_EQ(std::memcmp(&got[i], &alone[i], sizeof(Hit)), 0)
                 << name << " ray " << i << " in a list of " << count << " from " << first << ": t "
                 << got[i].t << " vs " << alone[i].t;
+            ASSERT_EQ(occluded[i], alone_occluded[i])
+                << name << " occlusion of ray " << i << " in a list of " << count << " from " << first;
           }
         }
       }
