@@ -101,7 +101,7 @@ struct QueryBatch {
     uint64_t without_hit = 0;
     if constexpr (kKind == QueryKind::kClosestHit) {
       for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
-        const std::span<const uint32_t> chunk = ids.subspan(from, std::min(kTraceChunk, ids.size() - from));
+        const std::span<const uint32_t> chunk = chunk_at(ids, from);
         float t[kTraceChunk];
         uint32_t primitive[kTraceChunk], geometry[kTraceChunk];
         for (std::size_t k = 0; k < chunk.size(); ++k) {
@@ -121,7 +121,7 @@ struct QueryBatch {
       }
     } else if constexpr (kKind == QueryKind::kAnyHit) {
       for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
-        const std::span<const uint32_t> chunk = ids.subspan(from, std::min(kTraceChunk, ids.size() - from));
+        const std::span<const uint32_t> chunk = chunk_at(ids, from);
         for (const uint32_t i : chunk) prefetch_ray(i);
         accel.occluded(chunk, rays.data(), occluded);
         for (const uint32_t i : chunk) without_hit += occluded[i] == 0;
@@ -133,6 +133,11 @@ struct QueryBatch {
   }
 
  private:
+  // The kTraceChunk ids of `ids` from `from` (fewer at the end).
+  static std::span<const uint32_t> chunk_at(std::span<const uint32_t> ids, std::size_t from) {
+    return ids.subspan(from, std::min(kTraceChunk, ids.size() - from));
+  }
+
   // A queue's rays are scattered over the batch: asking for a chunk's rays at
   // once overlaps their cache misses, which the structure would otherwise
   // take one ray at a time (12 % of a sparse scene's warm incoherent batch).
@@ -147,7 +152,7 @@ struct QueryBatch {
     if (collector == nullptr) {
       // Counting only: no records.
       for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
-        const std::span<const uint32_t> chunk = ids.subspan(from, std::min(kTraceChunk, ids.size() - from));
+        const std::span<const uint32_t> chunk = chunk_at(ids, from);
         uint32_t before[kTraceChunk];
         for (std::size_t k = 0; k < chunk.size(); ++k) {
           prefetch_ray(chunk[k]);
@@ -161,7 +166,7 @@ struct QueryBatch {
     std::vector<RayHitRecord> found;
     for (std::size_t from = 0; from < ids.size(); from += kTraceChunk) {
       found.clear();
-      const std::span<const uint32_t> chunk = ids.subspan(from, std::min(kTraceChunk, ids.size() - from));
+      const std::span<const uint32_t> chunk = chunk_at(ids, from);
       for (const uint32_t i : chunk) prefetch_ray(i);
       accel.all_hits(chunk, rays.data(), found);
       // A ray's records are consecutive (structures answer ray by ray).

@@ -478,9 +478,7 @@ void intersect_watertight_coherent(const WideBvhSetView& set, std::span<const ui
   std::size_t i = 0;
   while (i < ray_ids.size()) {
     const uint32_t run = packet_run<kWidth>(ray_ids, i, rays);
-    if (run * 2 < kWidth && kWalks == 1) {
-      intersect_set<V, WatertightLanes<V>>(set, ray_ids.subspan(i, run), rays, hits);
-    } else if (run * 2 < kWidth) {
+    if (run * 2 < kWidth) {
       for (uint32_t k = 0; k < run; ++k) {
         singles[single_count++] = ray_ids[i + k];
         if (single_count == kGathered) trace_singles();

@@ -1,8 +1,8 @@
-// Closest hits and occlusion of many rays in one wide BVH with several rays'
-// walks interleaved: each walk advances by one node or one leaf in turn. A single
-// ray's walk is a chain of dependent steps (fetch a node, test its boxes,
-// pick the next), bound by memory latency and branch outcomes; a second and
-// third chain give the core independent work while one waits. Measured
+// Closest hits and occlusion of many rays in one wide BVH with several
+// rays' walks interleaved: each walk advances by one node or one leaf in
+// turn. A single ray's walk is a chain of dependent steps (fetch a node, test
+// its boxes, pick the next), bound by memory latency and branch outcomes; a
+// second and third chain give the core independent work while one waits. Measured
 // (docs/BENCHMARKS.md, issue 23): warm incoherent batches of the sparse scene
 // and the city take ~0.87-0.90x the time with three walks, where every brick
 // visit starts cold in the brick's structure; on the bunny, whose one tree

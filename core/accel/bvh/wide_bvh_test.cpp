@@ -240,13 +240,13 @@ TEST(WideBvh, CameraRunsTracedAsPacketsMatchTheScalarReference) {
   expect_paths_match_reference("sphere from inside", build_trees(sphere), inside, inside.size() / 2);
 }
 
-// The single-ray walks of one call are interleaved (wide_bvh_stepped_kernels.h):
-// each ray's answer (closest hit and occlusion) must not depend on which rays
-// share the call. Lists of
-// every length up to a few walks, a ray listed twice, rays whose earlier hit
-// is already nearer than anything here (no walk) between rays that walk,
-// and camera runs (packets) between single rays, against the ray traced
-// alone, on every path and test.
+// The single-ray walks of one call are interleaved
+// (wide_bvh_stepped_kernels.h): each ray's answer (closest hit and occlusion)
+// must not depend on which rays share the call. Lists of every length up to
+// a few walks, a ray listed twice, rays already answered (a hit nearer than
+// anything here, or occluded) between rays that walk, and camera runs
+// (packets) between single rays, against the ray traced alone, on every path
+// and test.
 TEST(WideBvh, InterleavedWalksAnswerEachRayAsIfTracedAlone) {
   const BrickData bunny = load_brick_from(accel_test::bunny_path());
   const Trees trees = build_trees(bunny);
