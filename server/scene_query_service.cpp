@@ -116,6 +116,7 @@ QueryOptions SceneQueryService::options_of(const v1::QueryRequest& request,
   options.reorder = !request.no_reorder();
   options.strict = request.strict();
   options.dynamic_snapshot = dynamic;
+  options.only_bricks.assign(request.only_bricks().begin(), request.only_bricks().end());
   return options;
 }
 
@@ -310,11 +311,19 @@ grpc::Status SceneQueryService::GetSceneInfo(grpc::ServerContext* context, const
   response->set_degenerate_count(manifest.degenerate_count);
   response->set_brick_count(store.brick_count());
   response->set_upper_depth(manifest.upper.depth());
-  for (const float value : {manifest.bounds.lo.x, manifest.bounds.lo.y, manifest.bounds.lo.z}) {
-    response->add_bounds_lo(value);
-  }
-  for (const float value : {manifest.bounds.hi.x, manifest.bounds.hi.y, manifest.bounds.hi.z}) {
-    response->add_bounds_hi(value);
+  const auto add_point = [](google::protobuf::RepeatedField<float>* out, const auto& p) {
+    out->Add(p.x);
+    out->Add(p.y);
+    out->Add(p.z);
+  };
+  add_point(response->mutable_bounds_lo(), manifest.bounds.lo);
+  add_point(response->mutable_bounds_hi(), manifest.bounds.hi);
+  for (const BrickRecord& brick : manifest.bricks) {
+    v1::BrickSummary* out = response->add_bricks();
+    add_point(out->mutable_bounds_lo(), brick.bounds.lo);
+    add_point(out->mutable_bounds_hi(), brick.bounds.hi);
+    out->set_triangle_count(brick.triangle_count);
+    out->set_size_bytes(brick.size_bytes);
   }
   for (const InputRecord& input : manifest.inputs) {
     v1::SceneInput* out = response->add_inputs();

@@ -212,6 +212,7 @@ class SceneQueryService final : public SceneQueryBase {
   struct StreamSettings {
     v1::HitFields hit_fields = v1::HIT_FIELDS_ALL;
     std::shared_ptr<const DynamicSnapshot> dynamic;
+    std::vector<uint32_t> only_bricks;  // the first chunk's, which every chunk repeats
   };
   // Takes the first chunk's settings into `stream`, or checks a later
   // chunk's against them (INVALID_ARGUMENT naming the chunk; NOT_FOUND for a

@@ -9,6 +9,7 @@
 #include <grpcpp/support/byte_buffer.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <span>
@@ -31,12 +32,19 @@ Status SceneQueryService::settle_stream_chunk(const v1::QueryRequest& request, c
                                               StreamSettings& stream) const {
   // A group of chunks is traced and packed as its first chunk asks, so the
   // whole stream has the fields of its first chunk.
+  // Chunks traced together share one part of the scene, so the whole
+  // stream traces its first chunk's.
   if (position.chunk == 0) {
     stream.hit_fields = request.hit_fields();
+    stream.only_bricks.assign(request.only_bricks().begin(), request.only_bricks().end());
   } else if (request.hit_fields() != stream.hit_fields) {
     return invalid_argument(where(position) + " asks for hit_fields " + std::to_string(request.hit_fields()) +
                             ", the stream's are " + std::to_string(stream.hit_fields) +
                             " (one set of fields a stream)");
+  } else if (!std::equal(request.only_bricks().begin(), request.only_bricks().end(), stream.only_bricks.begin(),
+                         stream.only_bricks.end())) {
+    return invalid_argument(where(position) + " names other only_bricks than the stream's first chunk (" +
+                            std::to_string(stream.only_bricks.size()) + " bricks; one part a stream)");
   }
   // The whole stream sees one version of the dynamic layer: the one its
   // first chunk names (or the latest then); later chunks may only repeat it.

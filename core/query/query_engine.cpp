@@ -146,6 +146,10 @@ Status QueryEngine::all_hits(std::span<const Ray> rays, std::span<uint32_t> coun
                              std::vector<RayHitRecord>* records, const QueryOptions& options,
                              QueryStats* stats) {
   if (counts.size() != rays.size()) return invalid_argument("hit counts and rays differ in length");
+  if (!options.only_bricks.empty()) {
+    return invalid_argument("only_bricks is for closest-hit and any-hit queries (Intersect, Occluded), not "
+                            "every-hit ones: leave it empty");
+  }
   AllHitsCollector collector;
   // Neither the resident set nor trace-ahead keeps every hit.
   QueryOptions every_hit = options;
@@ -262,7 +266,14 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
   const auto start = Clock::now();
   const uint64_t ticks_start = ticks();
   const uint32_t brick_count = store_->brick_count();
+  for (const uint32_t b : options.only_bricks) {
+    if (b >= brick_count)
+      return invalid_argument("only_bricks: brick " + std::to_string(b) + " is not in the scene (its " +
+                              std::to_string(brick_count) + " bricks have ids below " +
+                              std::to_string(brick_count) + ")");
+  }
   ProxyGate gate(proxies_.get(), cache_->builder().hit_rounding_scale(), bounds_.get());
+  gate.restrict_to(options.only_bricks, brick_count);
   if (proxies_ != nullptr && options.reorder) {
     // Nothing is ever evicted when the budget holds the scene: a brick is
     // built at most once, so its queue is tested when it is to be built

@@ -131,6 +131,16 @@ struct QueryOptions {
   // all of them, however many changes are made meanwhile); wins over
   // dynamic_version when set.
   std::shared_ptr<const DynamicSnapshot> dynamic_snapshot;
+  // When not empty, the batch traces only these bricks (ids below
+  // brick_count; any order, repeats allowed; INVALID_ARGUMENT naming the
+  // first id out of range): each ray's answer is its nearest hit (closest
+  // hit) or its occlusion (any hit) among their triangles, and the other
+  // bricks are passed over unloaded and unbuilt (counted as
+  // bricks_outside_part). A replica that owns part of the scene answers
+  // for its part; the nearest of the parts' hits under the tie rule
+  // (hit_is_better) is bitwise the whole scene's answer, and a ray is
+  // occluded when any part says so. The dynamic layer is traced whole.
+  std::vector<uint32_t> only_bricks;
 };
 
 class QueryEngine {

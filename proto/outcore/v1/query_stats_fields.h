@@ -43,5 +43,6 @@
   X(rays_entering_no_brick)         \
   X(brick_visits_without_hit)       \
   X(bricks_skipped_by_bound)        \
-  X(subtree_loads_recycled)
+  X(subtree_loads_recycled)        \
+  X(bricks_outside_part)
 // clang-format on
