@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
 """Replicas with cache-affinity routing (issue 30): brick builds and
 throughput of 4 replicas at budget B each on a scene of about 4 B, routed by
-ray (outcore.SceneClient([...])), against one server at budget 4 B and
+brick (outcore.SceneClient([...]), the default: each replica owns a part of
+the bricks and traces every ray in it) or by ray (routing="rays": each ray to
+one replica by its entry cell), against one server at budget 4 B and
 against round-robin over the same replicas (each batch whole to the next
 replica, as a per-connection load balancer does); throughput with 1, 2 and 4
-replicas; the share of keys that move when a replica joins, and the peak
-load per replica.
+replicas; the share of keys (bricks, or rays' cells) that move when a
+replica joins, and the peak load per replica (triangles owned, or rays).
 
 For each ray kind (incoherent, camera; bench/make_rays.py with a new seed per
 batch: a camera elsewhere on the sphere each time), fresh servers, then
@@ -43,14 +45,14 @@ def run_config(name, store, batches, budget_mb, replicas, mode, route_cells):
     servers = [remote_bench.Server(store, ["--cache-mb", str(budget_mb)]) for _ in range(replicas)]
     addresses = [s.address for s in servers]
     singles = [outcore.SceneClient(a, timeout=3600) for a in addresses]
-    routed = (outcore.SceneClient(addresses, timeout=3600, route_cells=route_cells) if mode == "affinity"
-              else None)
+    routed = (outcore.SceneClient(addresses, timeout=3600, routing=mode, route_cells=route_cells)
+              if mode in ("bricks", "rays") else None)
     per_batch, seconds, answers = [], [], []
     try:
         for k, rays in enumerate(batches):
             before = builds(singles)
             t0 = time.perf_counter()
-            if mode == "affinity":
+            if routed is not None:
                 hits = routed.cast_rays(rays)
             else:  # round-robin: the whole batch to the next replica
                 hits = singles[k % replicas].cast_rays(rays)
@@ -59,10 +61,15 @@ def run_config(name, store, batches, budget_mb, replicas, mode, route_cells):
             answers.append(np.array(hits["t_hit"]).view(np.uint32))
         peak_resident = max(c.stats()["peak_resident_bytes"] for c in singles)
         load = None
-        if routed is not None:
+        if mode == "rays":
             _, replica_of_ray, _ = routed._router.plan(batches[-1])
             counts = np.bincount(replica_of_ray, minlength=replicas)
             load = float(counts.max() / counts.mean())
+        elif mode == "bricks":
+            bricks = routed.scene_info()["bricks"]
+            owned = [sum(bricks[b]["triangle_count"] for b in part)
+                     for part in routed._router.plan_bricks().values()]
+            load = float(max(owned) / (sum(owned) / replicas))
     finally:
         for c in singles + ([routed] if routed else []):
             c.close()
@@ -77,13 +84,19 @@ def run_config(name, store, batches, budget_mb, replicas, mode, route_cells):
     return row, answers
 
 
-def moved_keys(batches, bounds, before, after, cells):
+def moved_keys(batches, bounds, before, after, cells, bricks=None, load_factor=1.25):
+    """Shares of the keys and of their load that change replica when one
+    joins: the batches' cells weighed by rays, or the bricks by triangles."""
     from outcore import _routing
-    keys = np.concatenate([_routing.ray_keys(b, *bounds, cells=cells) for b in batches])
-    unique, counts = np.unique(keys, return_counts=True)
-    load = {int(k): int(c) for k, c in zip(unique, counts)}
-    ring_a = _routing.HashRing([f"r{i}:1" for i in range(before)]).assign(load)
-    ring_b = _routing.HashRing([f"r{i}:1" for i in range(after)]).assign(load)
+    if bricks is not None:
+        positions = _routing.brick_positions(bricks, *bounds)
+        load = {int(p): b["triangle_count"] for p, b in zip(positions, bricks)}
+    else:
+        keys = np.concatenate([_routing.ray_keys(b, *bounds, cells=cells) for b in batches])
+        unique, counts = np.unique(keys, return_counts=True)
+        load = {int(k): int(c) for k, c in zip(unique, counts)}
+    ring_a = _routing.HashRing([f"r{i}:1" for i in range(before)]).assign(load, load_factor)
+    ring_b = _routing.HashRing([f"r{i}:1" for i in range(after)]).assign(load, load_factor)
     moved = [k for k in load if ring_a[k] != ring_b[k]]
     return len(moved) / len(load), sum(load[k] for k in moved) / sum(load.values())
 
@@ -112,11 +125,12 @@ def main():
                  "--seed", str(100 + k)])
             batches.append(np.load(path))
         reference = None
-        for name, replicas, budget, mode in (("one server, 4B", 1, 4 * BUDGET_MB, "affinity"),
-                                             ("4 replicas, affinity", 4, BUDGET_MB, "affinity"),
+        for name, replicas, budget, mode in (("one server, 4B", 1, 4 * BUDGET_MB, "single"),
+                                             ("4 replicas, by brick", 4, BUDGET_MB, "bricks"),
+                                             ("4 replicas, by ray", 4, BUDGET_MB, "rays"),
                                              ("4 replicas, round-robin", 4, BUDGET_MB, "round-robin"),
-                                             ("2 replicas, affinity", 2, BUDGET_MB, "affinity"),
-                                             ("1 replica, B", 1, BUDGET_MB, "affinity")):
+                                             ("2 replicas, by brick", 2, BUDGET_MB, "bricks"),
+                                             ("1 replica, B", 1, BUDGET_MB, "single")):
             if a.configs and name not in a.configs.split(";") and name != "one server, 4B":
                 continue
             row, answers = run_config(name, store, batches, budget, replicas, mode, a.route_cells)
@@ -126,6 +140,15 @@ def main():
             row["same_answers"] = all(np.array_equal(x, y) for x, y in zip(answers, reference))
             rows.append(row)
         moves[kind] = {f"{n}->{n + 1}": moved_keys(batches, bounds, n, n + 1, a.route_cells) for n in (3, 4)}
+    import outcore
+    probe = remote_bench.Server(store, [])
+    try:
+        with outcore.SceneClient(probe.address) as client:
+            bricks = client.scene_info()["bricks"]
+    finally:
+        probe.stop()
+    moves["bricks"] = {f"{n}->{n + 1}": moved_keys(None, bounds, n, n + 1, a.route_cells, bricks, 1.05)
+                       for n in (3, 4)}
     print(f"\nscene gen:city?copies=400 (bvh bricks, 36.3 MiB built), B = {BUDGET_MB} MiB; {a.batches} batches "
           f"of {a.rays:,} rays a kind; builds summed over the replicas; {os.cpu_count()} cores shared by all\n")
     print("| rays | configuration | builds: first batch / each later (mean) / all | all vs one server 4B | "

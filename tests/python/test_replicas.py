@@ -1,8 +1,11 @@
 """Replicas with cache-affinity routing (issue 30), on loopback: three real
 `outcore serve` processes over one store, each with a cache budget at most a
-quarter of the scene's built size; a SceneClient given their addresses
-splits each batch by routing key, sends the parts in parallel and puts the
-answers back in input order, bitwise those of one server; a replica killed
+quarter of the scene's built size. A SceneClient given their addresses
+either shares the bricks out (routing="bricks", the default: every replica
+traces every ray in its own bricks, the nearest answer kept) or splits each
+batch by routing key (routing="rays": parts in parallel, answers put back in
+input order); either way bitwise the answers of one server, with every hit
+field; each brick is built on one replica only (bricks); a replica killed
 before or during a batch costs nothing but time; adding a replica moves few
 keys; a "dns:" target is resolved into replicas."""
 
@@ -72,9 +75,64 @@ def _same_hits(a, b):
     np.testing.assert_array_equal(a["geometry_ids"], b["geometry_ids"])
 
 
-def test_routed_answers_are_one_servers_bitwise_and_spread_within_the_bound(replicas, rays, reference):
+def test_parts_by_brick_answer_bitwise_as_one_server_with_every_hit_field(replicas, rays, reference):
     addresses = [s.address for s in replicas]
     with outcore.SceneClient(addresses, timeout=120) as client:
+        assert client.replicas() == sorted(addresses)
+        hits = client.cast_rays(rays)
+        assert client.last_replicas == 3
+        assert client.last_stats["rays"] == 3 * len(rays)  # every replica traced every ray
+        assert client.last_stats["bricks_outside_part"] > 0
+        _same_hits(hits, reference[0])
+        for name in ("primitive_uvs", "primitive_normals"):
+            np.testing.assert_array_equal(hits[name].view(np.uint32), reference[0][name].view(np.uint32))
+        np.testing.assert_array_equal(client.test_occlusions(rays), reference[1])
+        short = client.cast_rays(rays, hit_fields="t_ids")
+        _same_hits(short, reference[0])
+        t_only = client.cast_rays(rays, hit_fields="t")
+        np.testing.assert_array_equal(t_only["t_hit"].view(np.uint32), reference[0]["t_hit"].view(np.uint32))
+        # Streamed in chunks, each chunk naming the replica's bricks.
+        with outcore.SceneClient(addresses, timeout=120, chunk_rays=20_000, shared_memory=False) as chunked:
+            _same_hits(chunked.cast_rays(rays), reference[0])
+        parts = client._router.plan_bricks()
+        bricks = client.scene_info()["bricks"]
+    owned = sorted(b for part in parts.values() for b in part)
+    assert owned == list(range(len(bricks)))  # every brick on exactly one replica
+    triangles = [sum(bricks[b]["triangle_count"] for b in part) for part in parts.values()]
+    largest = max(b["triangle_count"] for b in bricks)
+    assert max(triangles) <= max(np.ceil(1.05 * sum(triangles) / 3), largest), triangles
+    assert len(parts) == 3
+
+
+def test_by_brick_each_brick_is_built_on_one_replica_only(city, rays):
+    # Budgets that hold the scene: builds show where each brick went.
+    servers = [Server(city, "--cache-mb", 256) for _ in range(3)]
+    try:
+        with outcore.SceneClient([s.address for s in servers], timeout=120) as client:
+            client.cast_rays(rays)
+            client.cast_rays(rays[::-1].copy())
+            bricks = client.scene_info()["brick_count"]
+            parts = client._router.plan_bricks()
+            builds = {s.address: outcore.SceneClient(s.address).stats()["brick_builds"] for s in servers}
+        for address, part in parts.items():
+            assert builds[address] <= len(part), (builds, {a: len(p) for a, p in parts.items()})
+        assert sum(builds.values()) <= bricks
+    finally:
+        _stop(servers)
+
+
+def test_a_part_names_bricks_of_the_scene(replicas, rays):
+    from outcore.client import _INTERSECT, _QueryOptions
+    with outcore.SceneClient(replicas[0].address, timeout=30) as client:
+        bricks = client.scene_info()["brick_count"]
+        with pytest.raises(outcore.OutcoreError, match=f"brick {bricks} is not in the scene") as e:
+            client._query(_INTERSECT, rays[:10], _QueryOptions(False, None, (0, bricks)))
+        assert e.value.code == "INVALID_ARGUMENT"
+
+
+def test_routed_by_ray_answers_are_one_servers_bitwise_and_spread_within_the_bound(replicas, rays, reference):
+    addresses = [s.address for s in replicas]
+    with outcore.SceneClient(addresses, timeout=120, routing="rays") as client:
         assert client.replicas() == sorted(addresses)
         hits = client.cast_rays(rays)
         assert client.last_replicas == 3
@@ -92,7 +150,7 @@ def test_routed_answers_are_one_servers_bitwise_and_spread_within_the_bound(repl
 
 
 def test_the_same_key_goes_to_the_same_replica_every_batch(replicas, rays):
-    with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
+    with outcore.SceneClient([s.address for s in replicas], timeout=120, routing="rays") as client:
         _, first, _ = client._router.plan(rays)
         _, again, _ = client._router.plan(rays)
         _, half, _ = client._router.plan(rays[: len(rays) // 2])
@@ -101,17 +159,18 @@ def test_the_same_key_goes_to_the_same_replica_every_batch(replicas, rays):
     assert np.mean(half == first[: len(rays) // 2]) > 0.6
 
 
-def test_a_replica_down_before_or_during_a_batch_changes_no_answer(city, rays, reference):
+@pytest.mark.parametrize("routing", ["bricks", "rays"])
+def test_a_replica_down_before_or_during_a_batch_changes_no_answer(city, rays, reference, routing):
     servers = _start(city, 3)
     try:
         addresses = [s.address for s in servers]
         servers[0].process.send_signal(signal.SIGKILL)
         servers[0].process.wait(30)
-        with outcore.SceneClient(addresses, timeout=120) as client:
+        with outcore.SceneClient(addresses, timeout=120, routing=routing) as client:
             _same_hits(client.cast_rays(rays), reference[0])
             assert servers[0].address not in client._router._live()
         # During: kill a second replica while a batch is in flight.
-        with outcore.SceneClient(addresses[1:], timeout=120) as client:
+        with outcore.SceneClient(addresses[1:], timeout=120, routing=routing) as client:
             client.cast_rays(rays[:1000])  # connected
             killer = threading.Timer(0.02, lambda: servers[1].process.send_signal(signal.SIGKILL))
             killer.start()
@@ -128,8 +187,34 @@ def test_a_replica_down_before_or_during_a_batch_changes_no_answer(city, rays, r
         _stop(servers)
 
 
-def test_adding_a_replica_moves_few_keys(replicas, rays):
+def test_adding_a_replica_moves_few_bricks(replicas):
     with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
+        info = client.scene_info()
+    # The 400-copy city's bricks are too few for shares to mean much: its
+    # bricks' boxes, repeated 8 x 8 over a larger ground, stand in for a
+    # large scene's.
+    bricks = []
+    for i in range(8):
+        for j in range(8):
+            for b in info["bricks"]:
+                shift = np.array([i * 100.0, 0, j * 100.0])
+                bricks.append({"bounds_lo": list(np.asarray(b["bounds_lo"]) + shift),
+                               "bounds_hi": list(np.asarray(b["bounds_hi"]) + shift),
+                               "triangle_count": b["triangle_count"]})
+    lo = np.min([b["bounds_lo"] for b in bricks], axis=0)
+    hi = np.max([b["bounds_hi"] for b in bricks], axis=0)
+    positions = _routing.brick_positions(bricks, lo, hi)
+    assert len(set(int(p) for p in positions)) == len(bricks)
+    load = {int(p): b["triangle_count"] for p, b in zip(positions, bricks)}
+    three = _routing.HashRing(["a:1", "b:1", "c:1"]).assign(load, 1.05)
+    four = _routing.HashRing(["a:1", "b:1", "c:1", "d:1"]).assign(load, 1.05)
+    moved = sum(load[k] for k in load if three[k] != four[k]) / sum(load.values())
+    # The new replica's fair share is a quarter of the triangles.
+    assert 0.2 < moved < 0.45, moved
+
+
+def test_adding_a_replica_moves_few_keys(replicas, rays):
+    with outcore.SceneClient([s.address for s in replicas], timeout=120, routing="rays") as client:
         client._router.plan(rays[:10])
         keys = _routing.ray_keys(rays, *client._router._bounds, cells=client._router.cells)
     unique, counts = np.unique(keys, return_counts=True)
@@ -157,6 +242,10 @@ def test_replicas_refuse_the_dynamic_layer_and_bad_arguments(replicas):
         outcore.SceneClient([])
     with pytest.raises(ValueError, match="route_cells"):
         outcore.SceneClient([replicas[0].address], route_cells=0)
+    with pytest.raises(ValueError, match="routing"):
+        outcore.SceneClient([replicas[0].address], routing="cells")
+    with pytest.raises(ValueError, match="load_factor"):
+        outcore.SceneClient([replicas[0].address], load_factor=0.9)
     with pytest.raises(outcore.OutcoreError, match="cannot resolve"):
         outcore.SceneClient("dns:///no-such-host.invalid:50051")
 
@@ -188,7 +277,7 @@ def test_outcore_query_routes_over_a_replica_list(replicas, rays, reference, tmp
     np.testing.assert_array_equal(hits["t_hit"].view(np.uint32), reference[0]["t_hit"].view(np.uint32))
     np.testing.assert_array_equal(hits["primitive_id"], reference[0]["primitive_ids"])
     # The C++ and Python clients place the same rays on the same replicas.
-    with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
+    with outcore.SceneClient([s.address for s in replicas], timeout=120, routing="rays") as client:
         _, replica_of_ray, names = client._router.plan(rays)
     assert names == sorted(s.address for s in replicas)
     assert np.bincount(replica_of_ray, minlength=3).min() > 0

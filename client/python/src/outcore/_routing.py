@@ -160,6 +160,39 @@ def ray_keys(rays: np.ndarray, lo, hi, cells: int = 8) -> np.ndarray:
     return np.where(enters, positions, miss_positions[blocks] if n else positions)
 
 
+def brick_positions(bricks: list, lo, hi) -> np.ndarray:
+    """Each brick's place on the ring (routing="bricks"): the Morton code of
+    its box's centre on a 128^3 grid over the scene's box, so that a
+    replica's arcs hold neighbouring bricks, with the brick id's hash below
+    it so that no two bricks share a place."""
+    if not bricks:
+        return np.zeros(0, dtype=np.uint64)
+    lo = np.asarray(lo, dtype=np.float64)
+    extent = np.where(np.asarray(hi, np.float64) > lo, np.asarray(hi, np.float64) - lo, 1.0)
+    centres = np.array([(np.asarray(b["bounds_lo"], np.float64) + np.asarray(b["bounds_hi"], np.float64)) / 2
+                        for b in bricks])
+    cell = np.clip(np.floor((centres - lo) / extent * 128), 0, 127).astype(np.int64)
+    code = _spread_bits(cell[:, 0]) | (_spread_bits(cell[:, 1]) << np.uint64(1)) | \
+        (_spread_bits(cell[:, 2]) << np.uint64(2))
+    low = np.array([_hash64(f"brick:{i}") >> 21 for i in range(len(bricks))], dtype=np.uint64)
+    return (code << np.uint64(43)) | low
+
+
+def merge_nearest(merged: np.ndarray, part: np.ndarray) -> None:
+    """Keeps in `merged` the nearer of its hit and the part's, ray by ray,
+    under the engine's tie rule (smaller t, then geometry_id, then
+    primitive_id; misses have t = inf): occlusion flags are ORed."""
+    if merged.dtype.names is None:
+        np.bitwise_or(merged, part, out=merged)
+        return
+    better = part["t_hit"] < merged["t_hit"]
+    if "geometry_id" in merged.dtype.names:
+        same_t = part["t_hit"] == merged["t_hit"]
+        g, mg = part["geometry_id"], merged["geometry_id"]
+        better |= same_t & ((g < mg) | ((g == mg) & (part["primitive_id"] < merged["primitive_id"])))
+    merged[better] = part[better]
+
+
 def resolve(target: str) -> list[str]:
     """HOST:PORT addresses a "dns:///NAME:PORT" (or "dns:NAME:PORT") target
     names now; OutcoreError UNAVAILABLE when it resolves to nothing."""
@@ -185,9 +218,13 @@ class Router:
     """Routes the ray queries of a replicated SceneClient (see the module)."""
 
     def __init__(self, targets, make_client, cells: int = 8, load_factor: float = 1.25,
-                 resolve_every: float = 30.0, retry_after: float = 30.0):
+                 resolve_every: float = 30.0, retry_after: float = 30.0, routing: str = "bricks",
+                 brick_load_factor: float = 1.05):
         self._targets = list(targets)
         self._make_client = make_client
+        self.routing = routing
+        self.brick_load_factor = brick_load_factor
+        self._bricks = None  # SceneInfo.bricks, fetched once
         self.cells = cells
         self.load_factor = load_factor
         self.resolve_every = resolve_every
@@ -275,10 +312,12 @@ class Router:
         return ring, replica_of_key[inverse], ring.replicas
 
     def _scene_bounds(self, live: list[str]):
-        """The scene's box from the first replica that answers."""
+        """The scene's box from the first replica that answers (and its
+        bricks, for routing by bricks)."""
         for address in live:
             try:
                 info = self.client(address).scene_info()
+                self._bricks = info.get("bricks", [])
                 return info["bounds_lo"], info["bounds_hi"]
             except OutcoreError as e:
                 if e.code != "UNAVAILABLE":
@@ -286,24 +325,68 @@ class Router:
                 self._mark_down(address)
         raise OutcoreError("UNAVAILABLE", f"no replica answered GetSceneInfo (tried {', '.join(live)})")
 
+    def plan_bricks(self) -> dict:
+        """Replica -> the brick ids it owns: bricks on the ring by place
+        (brick_positions), weighed by their triangles, bounded load
+        brick_load_factor (parts fit a replica's share of the cache)."""
+        self._refresh()
+        live = self._live()
+        if not live:
+            raise OutcoreError("UNAVAILABLE", "no replica is up (all failed in the last "
+                                              f"{self.retry_after:g} s)")
+        if self._bounds is None:
+            self._bounds = self._scene_bounds(live)
+            live = self._live()
+        ring = HashRing(live)
+        positions = brick_positions(self._bricks, *self._bounds)
+        weights = {int(p): max(1, int(b.get("triangle_count", 0))) for p, b in zip(positions, self._bricks)}
+        owner = ring.assign(weights, self.brick_load_factor)
+        parts: dict = {}
+        for brick, position in enumerate(positions):
+            parts.setdefault(owner[int(position)], []).append(brick)
+        return parts
+
     def query(self, rays: np.ndarray, run_part, out: np.ndarray) -> list:
-        """Answers `rays` into `out` by parts, run_part(client, part_rays)
-        returning (answers, stats) per part; returns the parts' stats."""
+        """Answers `rays` into `out` by parts, run_part(client, part_rays,
+        only_bricks) returning (answers, stats) per part; returns the parts'
+        stats. routing="bricks": every replica traces every ray in its own
+        bricks and the answers are merged (merge_nearest); "rays": each ray
+        goes to one replica, by its key."""
+        if self.routing == "bricks":
+            return self._query_by_bricks(rays, run_part, out)
         ring, replica_of_ray, replicas = self.plan(rays)
         parts = [(replicas[r], np.flatnonzero(replica_of_ray == r)) for r in range(len(replicas))]
         parts = [(address, idx) for address, idx in parts if idx.size]
-        futures = [(address, idx, self._pool.submit(run_part, self.client(address), rays[idx]))
+        futures = [(address, idx, self._pool.submit(run_part, self.client(address), rays[idx], ()))
                    for address, idx in parts]
         stats = []
         for address, idx, future in futures:
-            answers, part_stats = self._finish_part(address, idx, future, rays, run_part)
+            answers, part_stats = self._finish_part(address, future, idx.size,
+                                                    lambda client, idx=idx: run_part(client, rays[idx], ()))
             out[idx] = answers
             stats.append(part_stats)
         return stats
 
-    def _finish_part(self, address, idx, future, rays, run_part):
-        """A part's answers; on UNAVAILABLE, the same part from the next live
-        replicas on the ring, in turn."""
+    def _query_by_bricks(self, rays: np.ndarray, run_part, out: np.ndarray) -> list:
+        parts = self.plan_bricks()
+        futures = [(address, bricks, self._pool.submit(run_part, self.client(address), rays, tuple(bricks)))
+                   for address, bricks in sorted(parts.items())]
+        stats = []
+        first = True
+        for address, bricks, future in futures:
+            answers, part_stats = self._finish_part(
+                address, future, rays.shape[0], lambda client, bricks=bricks: run_part(client, rays, tuple(bricks)))
+            if first:
+                out[:] = answers
+                first = False
+            else:
+                merge_nearest(out, answers)
+            stats.append(part_stats)
+        return stats
+
+    def _finish_part(self, address, future, rays: int, run_again):
+        """A part's answers; on UNAVAILABLE, the same part (run_again(client))
+        from the next live replicas on the ring, in turn."""
         tried = {address}
         while True:
             try:
@@ -314,10 +397,10 @@ class Router:
                 self._mark_down(address)
                 live = [a for a in self._live() if a not in tried]
                 if not live:
-                    raise OutcoreError("UNAVAILABLE", f"every replica failed for a part of {idx.size} rays; "
+                    raise OutcoreError("UNAVAILABLE", f"every replica failed for a part of {rays} rays; "
                                                       f"last: {e.details}") from None
                 address = next(a for a in HashRing(self.replicas()).walk(_hash64(address)) if a in live)
                 tried.add(address)
                 with self._lock:
                     self.failovers += 1
-                future = self._pool.submit(run_part, self.client(address), rays[idx])
+                future = self._pool.submit(run_again, self.client(address))

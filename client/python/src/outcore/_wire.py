@@ -51,6 +51,7 @@ _TAG_REQUEST_SEQUENCE = bytes([4 << 3 | _VARINT])
 _TAG_REQUEST_SHARED = bytes([5 << 3 | _LEN])
 _TAG_REQUEST_DYNAMIC_VERSION = bytes([6 << 3 | _VARINT])
 _TAG_REQUEST_HIT_FIELDS = bytes([7 << 3 | _VARINT])
+_TAG_REQUEST_ONLY_BRICKS = bytes([8 << 3 | 2])  # packed uint32
 _TAG_BATCH_VERSION = bytes([1 << 3 | _VARINT])
 _TAG_BATCH_LAYOUT = bytes([2 << 3 | _VARINT])
 _TAG_BATCH_COUNT = bytes([3 << 3 | _VARINT])
@@ -117,6 +118,7 @@ def encode_query(
     shared: SharedRef | None = None,
     dynamic_version: int | None = None,
     hit_fields: int = HIT_FIELDS_ALL,
+    only_bricks=None,
 ) -> bytes:
     """Serialises a QueryRequest for C-contiguous (n, 6|8) '<f4' rays. With
     `shared` the rays are not copied in (batch.rays is omitted: they are in
@@ -148,6 +150,9 @@ def encode_query(
         parts += [_TAG_REQUEST_DYNAMIC_VERSION, varint(dynamic_version)]
     if hit_fields:
         parts += [_TAG_REQUEST_HIT_FIELDS, varint(hit_fields)]
+    if only_bricks is not None and len(only_bricks):
+        packed = b"".join(varint(int(b)) for b in only_bricks)
+        parts += [_TAG_REQUEST_ONLY_BRICKS, varint(len(packed)), packed]
     return b"".join(parts)
 
 

@@ -48,6 +48,7 @@ from typing import NamedTuple
 
 import grpc
 import numpy as np
+import numpy.lib.recfunctions  # noqa: F401  (np.lib.recfunctions)
 
 from . import _routing, _shared, _wire
 from ._rays import as_wire_rays
@@ -86,6 +87,7 @@ _SERVICE = pb.DESCRIPTOR.services_by_name["SceneQuery"].full_name
 class _QueryOptions(NamedTuple):
     strict: bool
     dynamic_version: int | None
+    only_bricks: tuple = ()  # a replica's part of the scene (routing="bricks")
 
 
 def _check_version(version) -> int | None:
@@ -162,11 +164,23 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
     PEM bytes); tls_cert and tls_key: a client certificate for servers that
     require one (serve --tls-client-ca). token: sent as "authorization:
     Bearer TOKEN" on every call (serve --auth-token-file). All keyword-only.
+
+    Replicas (docs/SCALING.md): `address` may be a list of "host:port"
+    strings or a "dns:///NAME:PORT" target. routing="bricks" (the default)
+    shares the scene's bricks out among the replicas on a ring (each
+    replica's part within load_factor x an even share of the triangles),
+    sends every batch to each replica for its own bricks
+    (QueryRequest.only_bricks) and keeps the nearest answer, so each brick
+    is built on one replica only; routing="rays" sends each ray to one
+    replica by the cell where it enters the scene (route_cells a side),
+    within load_factor x an even share of the rays. load_factor defaults to
+    1.05 for bricks and 1.25 for rays.
     """
 
     def __init__(self, address, timeout: float | None = None, max_message_mb: float = 64,
                  chunk_rays: int | None = None, shared_memory: bool = True, *, tls_ca=None, tls_cert=None,
-                 tls_key=None, token: str | None = None, route_cells: int = 8, load_factor: float = 1.25):
+                 tls_key=None, token: str | None = None, routing: str = "bricks", route_cells: int = 8,
+                 load_factor: float | None = None):
         self._router = None
         if isinstance(address, (list, tuple)) or (isinstance(address, str) and address.startswith("dns:")):
             targets = [address] if isinstance(address, str) else list(address)
@@ -174,13 +188,18 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
                 raise ValueError(f"replicas must be a non-empty list of 'host:port' strings, got {address!r}")
             if isinstance(route_cells, bool) or not isinstance(route_cells, int) or not 1 <= route_cells <= 64:
                 raise ValueError(f"route_cells must be an int in 1..64, got {route_cells!r}")
-            if not (load_factor >= 1 and math.isfinite(load_factor)):
+            if routing not in ("bricks", "rays"):
+                raise ValueError(f"routing must be 'bricks' or 'rays', got {routing!r}")
+            if load_factor is None:
+                load_factor = 1.05 if routing == "bricks" else 1.25
+            if isinstance(load_factor, bool) or not (load_factor >= 1 and math.isfinite(load_factor)):
                 raise ValueError(f"load_factor must be a number >= 1, got {load_factor!r}")
             options = dict(timeout=timeout, max_message_mb=max_message_mb, chunk_rays=chunk_rays,
                            shared_memory=shared_memory, tls_ca=tls_ca, tls_cert=tls_cert, tls_key=tls_key,
                            token=token)
             self._router = _routing.Router(targets, lambda replica: SceneClient(replica, **options),
-                                           cells=route_cells, load_factor=load_factor)
+                                           cells=route_cells, load_factor=load_factor, routing=routing,
+                                           brick_load_factor=load_factor)
             # Calls other than the ray queries go to one replica (the same
             # answer on any); the dynamic layer is refused (it is per server).
             address = self._router.replicas()[0]
@@ -425,12 +444,15 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
 
     def _routed_query(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
         """_query over the replicas: parts by routing key, in parallel (_routing)."""
-        def run_part(client, part):
-            answers = client._query(query, np.ascontiguousarray(part), opts)
+        def run_part(client, part, only_bricks):
+            answers = client._query(query, np.ascontiguousarray(part), opts._replace(only_bricks=only_bricks))
+            if answers.dtype != query.record_dtype:
+                # A shared-memory call's whole records, cut to the fields asked.
+                answers = np.lib.recfunctions.repack_fields(answers[list(query.record_dtype.names)])
             return answers, (client.last_stats, client.last_call_shared, client.last_dynamic_version)
 
         out = np.empty(rays.shape[0], dtype=query.record_dtype)
-        parts = self._router.query(rays, run_part, out)
+        parts = self._router.query(np.ascontiguousarray(rays), run_part, out)
         totals: dict = {}
         for stats, _, _ in parts:
             for key, value in (stats or {}).items():
@@ -478,7 +500,7 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
 
     def _query_unary(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
         request = _wire.encode_query(rays, strict=opts.strict, dynamic_version=opts.dynamic_version,
-                                     hit_fields=query.hit_fields)
+                                     hit_fields=query.hit_fields, only_bricks=opts.only_bricks)
         try:
             data = self._calls[query.unary](request, timeout=self.timeout)
         except grpc.RpcError as e:
@@ -511,7 +533,8 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
                     segment.read_answers(query.record_dtype, n, answers_offset))
 
         done = self._shared_call(self._calls[query.unary], query.unary, rays, n * query.record_dtype.itemsize,
-                                 finish, strict=opts.strict, dynamic_version=opts.dynamic_version)
+                                 finish, strict=opts.strict, dynamic_version=opts.dynamic_version,
+                                 only_bricks=opts.only_bricks)
         if done is None:
             return None
         reply, out = done
@@ -570,7 +593,8 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         # few are held at once, not a second copy of the batch.
         requests = (
             _wire.encode_query(rays[start : start + chunk], strict=opts.strict, sequence=sequence,
-                               dynamic_version=opts.dynamic_version, hit_fields=query.hit_fields)
+                               dynamic_version=opts.dynamic_version, hit_fields=query.hit_fields,
+                               only_bricks=opts.only_bricks)
             for sequence, start in enumerate(starts)
         )
         out = np.empty(n, dtype=query.record_dtype)
