@@ -84,7 +84,7 @@ def run_config(name, store, batches, budget_mb, replicas, mode, route_cells):
     return row, answers
 
 
-def moved_keys(batches, bounds, before, after, cells, bricks=None, load_factor=1.25):
+def moved_keys(batches, bounds, before, after, cells, bricks=None, load_factor=1.25, nodes=4):
     """Shares of the keys and of their load that change replica when one
     joins: the batches' cells weighed by rays, or the bricks by triangles."""
     from outcore import _routing
@@ -95,8 +95,8 @@ def moved_keys(batches, bounds, before, after, cells, bricks=None, load_factor=1
         keys = np.concatenate([_routing.ray_keys(b, *bounds, cells=cells) for b in batches])
         unique, counts = np.unique(keys, return_counts=True)
         load = {int(k): int(c) for k, c in zip(unique, counts)}
-    ring_a = _routing.HashRing([f"r{i}:1" for i in range(before)]).assign(load, load_factor)
-    ring_b = _routing.HashRing([f"r{i}:1" for i in range(after)]).assign(load, load_factor)
+    ring_a = _routing.HashRing([f"r{i}:1" for i in range(before)], nodes).assign(load, load_factor)
+    ring_b = _routing.HashRing([f"r{i}:1" for i in range(after)], nodes).assign(load, load_factor)
     moved = [k for k in load if ring_a[k] != ring_b[k]]
     return len(moved) / len(load), sum(load[k] for k in moved) / sum(load.values())
 
@@ -147,7 +147,9 @@ def main():
             bricks = client.scene_info()["bricks"]
     finally:
         probe.stop()
-    moves["bricks"] = {f"{n}->{n + 1}": moved_keys(None, bounds, n, n + 1, a.route_cells, bricks, 1.05)
+    from outcore import _routing
+    moves["bricks"] = {f"{n}->{n + 1}": moved_keys(None, bounds, n, n + 1, a.route_cells, bricks,
+                                                   _routing.BRICK_LOAD_FACTOR, _routing.BRICK_VIRTUAL_NODES)
                        for n in (3, 4)}
     print(f"\nscene gen:city?copies=400 (bvh bricks, 36.3 MiB built), B = {BUDGET_MB} MiB; {a.batches} batches "
           f"of {a.rays:,} rays a kind; builds summed over the replicas; {os.cpu_count()} cores shared by all\n")

@@ -41,8 +41,8 @@ Status SceneQueryService::settle_stream_chunk(const v1::QueryRequest& request, c
     return invalid_argument(where(position) + " asks for hit_fields " + std::to_string(request.hit_fields()) +
                             ", the stream's are " + std::to_string(stream.hit_fields) +
                             " (one set of fields a stream)");
-  } else if (!std::equal(request.only_bricks().begin(), request.only_bricks().end(), stream.only_bricks.begin(),
-                         stream.only_bricks.end())) {
+  } else if (!std::equal(request.only_bricks().begin(), request.only_bricks().end(),
+                         stream.only_bricks.begin(), stream.only_bricks.end())) {
     return invalid_argument(where(position) + " names other only_bricks than the stream's first chunk (" +
                             std::to_string(stream.only_bricks.size()) + " bricks; one part a stream)");
   }

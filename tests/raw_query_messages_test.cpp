@@ -54,6 +54,9 @@ TEST(RawQueryMessages, RequestParsesAsTheTypedRequest) {
           asked.no_reorder = !strict;
           asked.sequence = sequence;
           asked.hit_fields = fields;
+          // A replica's part (routing by brick), with ids of several varint bytes.
+          const std::vector<uint32_t> part = {0, 7, 300, 70000, 4000000000u};
+          if (strict) asked.only_bricks = part;
           const RawQueryRequest raw = encode_query_request(std::span<const Ray>(rays.data(), n), asked);
           v1::QueryRequest parsed;
           ASSERT_TRUE(parsed.ParseFromString(bytes_of(raw.buffer)));
@@ -66,6 +69,7 @@ TEST(RawQueryMessages, RequestParsesAsTheTypedRequest) {
           expected.set_no_reorder(!strict);
           expected.set_sequence(sequence);
           expected.set_hit_fields(fields);
+          if (strict) expected.mutable_only_bricks()->Add(part.begin(), part.end());
           EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(parsed, expected))
               << parsed.ShortDebugString().substr(0, 300);
           // The rays are referenced, not copied: the same bytes.

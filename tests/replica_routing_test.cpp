@@ -1,9 +1,10 @@
 // The C++ client's cache-affinity routing (client/cpp/replica_ring.h,
-// replica_router.h): the hash, keys, walks and assignment equal the Python
-// client's (outcore/_routing.py) on fixed vectors, so both send the same rays
-// to the same replicas; and three real `outcore serve` replicas under a small
-// budget answer a routed batch bitwise like one server, also when one of
-// them is killed before the batch.
+// replica_router.h): the hash, keys, brick places, walks and assignment
+// equal the Python client's (outcore/_routing.py) on fixed vectors, so both
+// send the same rays and bricks to the same replicas; and three real
+// `outcore serve` replicas under a small budget answer a batch routed by
+// brick or by ray bitwise like one server, also when one of them is killed
+// before the batch.
 #include <gtest/gtest.h>
 #include <signal.h>
 
@@ -59,6 +60,22 @@ TEST(ReplicaRing, HashKeysWalksAndAssignmentMatchThePythonClient) {
   EXPECT_EQ(owner.at(keys[0]), 2u);
 }
 
+TEST(ReplicaRing, BrickPlacesAndTheirAssignmentMatchThePythonClient) {
+  // Values printed by outcore._routing.brick_positions and
+  // HashRing(..., BRICK_VIRTUAL_NODES).assign(..., BRICK_LOAD_FACTOR).
+  const Vec3f lo{0, 0, 0}, hi{1, 0.1f, 1};
+  const std::vector<uint64_t> places = {brick_ring_position(0, {0, 0, 0}, {1, 0.1f, 1}, lo, hi),
+                                        brick_ring_position(1, {0.25f, 0, 0.5f}, {0.5f, 0.05f, 1}, lo, hi),
+                                        brick_ring_position(2, {-1, -1, -1}, {0, 0, 0}, lo, hi)};
+  EXPECT_EQ(places, (std::vector<uint64_t>{0xe000054985587993ull, 0x9c80023b73f1bdacull, 0x357e04cec2eull}));
+  const ReplicaRing ring({"c:3", "a:1", "b:2"}, kBrickVirtualNodes);
+  const std::map<uint64_t, uint32_t> owner =
+      ring.assign({{places[0], 5}, {places[1], 3}, {places[2], 4}}, kBrickLoadFactor);
+  EXPECT_EQ(owner.at(places[0]), 2u);
+  EXPECT_EQ(owner.at(places[1]), 1u);
+  EXPECT_EQ(owner.at(places[2]), 0u);
+}
+
 TEST(ReplicaRing, ReplicaListsAreCommaListsWithoutAScheme) {
   EXPECT_EQ(*replica_list("a:1,b:2"), (std::vector<std::string>{"a:1", "b:2"}));
   EXPECT_TRUE(replica_list("127.0.0.1:50051")->empty());
@@ -108,41 +125,76 @@ void expect_same_hits(const std::vector<Hit>& a, const std::vector<Hit>& b) {
   }
 }
 
+// By brick (the default) and by ray: answers bitwise one server's, with
+// every hit field and in occlusion; by brick every replica traces every ray
+// and each owns a part of the bricks; a replica killed: its part goes to the
+// next on the ring, later batches leave it out.
 TEST_F(ReplicaRouterTest, RoutedAnswersAreOneServersBitwiseAndAKilledReplicaCostsOnlyTime) {
-  auto servers = start(3);
-  ASSERT_EQ(servers.size(), 3u);
-  for (const auto& s : servers) ASSERT_NE(s, nullptr);
-  std::vector<Hit> reference;
-  ASSERT_NO_FATAL_FAILURE(one_server_hits(servers[0]->address(), reference));
-  std::vector<std::string> addresses;
-  for (const auto& s : servers) addresses.push_back(s->address());
-  auto router = ReplicaRouter::connect(addresses);
-  ASSERT_TRUE(router.ok()) << router.status().message();
-  std::vector<Hit> hits(rays_.size());
-  CallStats stats;
-  ASSERT_TRUE((*router)->intersect(rays_, hits, {}, &stats).ok());
-  expect_same_hits(hits, reference);
-  EXPECT_EQ(stats.engine.rays(), rays_.size());
-  const std::vector<uint64_t> loads = (*router)->plan_loads(rays_);
-  for (const uint64_t load : loads) EXPECT_GT(load, 0u);
-  std::vector<uint8_t> occluded(rays_.size()), occluded_reference(rays_.size());
-  ASSERT_TRUE((*router)->occluded(rays_, occluded).ok());
-  for (std::size_t i = 0; i < rays_.size(); ++i) occluded_reference[i] = reference[i].is_hit() ? 1 : 0;
-  EXPECT_EQ(occluded, occluded_reference);
+  for (const ReplicaRouting routing : {ReplicaRouting::kBricks, ReplicaRouting::kRays}) {
+    const bool by_brick = routing == ReplicaRouting::kBricks;
+    SCOPED_TRACE(by_brick ? "by brick" : "by ray");
+    auto servers = start(3);
+    ASSERT_EQ(servers.size(), 3u);
+    for (const auto& s : servers) ASSERT_NE(s, nullptr);
+    std::vector<Hit> reference;
+    ASSERT_NO_FATAL_FAILURE(one_server_hits(servers[0]->address(), reference));
+    std::vector<std::string> addresses;
+    for (const auto& s : servers) addresses.push_back(s->address());
+    auto router = ReplicaRouter::connect(addresses);
+    ASSERT_TRUE(router.ok()) << router.status().message();
+    EXPECT_EQ((*router)->routing(), ReplicaRouting::kBricks);
+    (*router)->set_routing(routing);
+    std::vector<Hit> hits(rays_.size());
+    CallStats stats;
+    ASSERT_TRUE((*router)->intersect(rays_, hits, {}, &stats).ok());
+    expect_same_hits(hits, reference);
+    EXPECT_EQ(stats.engine.rays(), (by_brick ? 3 : 1) * rays_.size());
+    EXPECT_EQ(stats.engine.bricks_outside_part() > 0, by_brick);
+    if (by_brick) {
+      std::vector<uint32_t> owned;
+      for (const auto& part : (*router)->plan_bricks()) {
+        EXPECT_FALSE(part.empty());
+        owned.insert(owned.end(), part.begin(), part.end());
+      }
+      std::sort(owned.begin(), owned.end());
+      auto probe = SceneClient::connect(addresses[0]);
+      ASSERT_TRUE(probe.ok());
+      ASSERT_EQ(owned.size(), (*probe)->connected_scene().brick_count());
+      ASSERT_GT(owned.size(), 3u);
+      for (uint32_t b = 0; b < owned.size(); ++b) EXPECT_EQ(owned[b], b);
+      // Fewer fields: the nearest still chosen by t and ids.
+      CallOptions short_hits;
+      short_hits.hit_fields = v1::HIT_FIELDS_T_IDS;
+      std::vector<Hit> t_ids(rays_.size());
+      ASSERT_TRUE((*router)->intersect(rays_, t_ids, short_hits).ok());
+      for (std::size_t i = 0; i < rays_.size(); ++i) {
+        ASSERT_EQ(std::memcmp(&t_ids[i].t, &reference[i].t, sizeof(float)), 0) << "ray " << i;
+        ASSERT_EQ(t_ids[i].primitive_id, reference[i].primitive_id) << "ray " << i;
+      }
+    } else {
+      for (const uint64_t load : (*router)->plan_loads(rays_)) EXPECT_GT(load, 0u);
+    }
+    std::vector<uint8_t> occluded(rays_.size()), occluded_reference(rays_.size());
+    ASSERT_TRUE((*router)->occluded(rays_, occluded).ok());
+    for (std::size_t i = 0; i < rays_.size(); ++i) occluded_reference[i] = reference[i].is_hit() ? 1 : 0;
+    EXPECT_EQ(occluded, occluded_reference);
 
-  // One replica dies: its part goes to the next on the ring.
-  servers[1]->signal(SIGKILL);
-  EXPECT_EQ(servers[1]->stop(SIGKILL), -1);
-  std::fill(hits.begin(), hits.end(), Hit{});
-  ASSERT_TRUE((*router)->intersect(rays_, hits).ok());
-  expect_same_hits(hits, reference);
-  EXPECT_GE((*router)->failovers(), 1u);
-  // Later batches leave it out.
-  const std::vector<std::string> names = (*router)->replicas();
-  const auto dead =
-      static_cast<std::size_t>(std::find(names.begin(), names.end(), servers[1]->address()) - names.begin());
-  ASSERT_LT(dead, names.size());
-  EXPECT_EQ((*router)->plan_loads(rays_)[dead], 0u);
+    servers[1]->signal(SIGKILL);
+    EXPECT_EQ(servers[1]->stop(SIGKILL), -1);
+    std::fill(hits.begin(), hits.end(), Hit{});
+    ASSERT_TRUE((*router)->intersect(rays_, hits).ok());
+    expect_same_hits(hits, reference);
+    EXPECT_GE((*router)->failovers(), 1u);
+    const std::vector<std::string> names = (*router)->replicas();
+    const auto dead = static_cast<std::size_t>(std::find(names.begin(), names.end(), servers[1]->address()) -
+                                               names.begin());
+    ASSERT_LT(dead, names.size());
+    if (by_brick) {
+      EXPECT_TRUE((*router)->plan_bricks()[dead].empty());
+    } else {
+      EXPECT_EQ((*router)->plan_loads(rays_)[dead], 0u);
+    }
+  }
 }
 
 // A dns: name resolved again (connect_resolved with a resolver whose list

@@ -35,6 +35,7 @@ struct QueryArgs {
   ChannelSecurityArgs security;
   bool quiet = false;
   std::string hit_fields = "all";
+  std::string routing = "bricks";
 };
 
 int run_query(const QueryArgs& args) {
@@ -70,6 +71,12 @@ int run_query(const QueryArgs& args) {
                           : client::ReplicaRouter::connect(replicas, connect_options);
     if (!connection.ok()) return report_command_error("query", connection.status().message());
     router = std::move(*connection);
+    if (args.routing == "rays") router->set_routing(client::ReplicaRouting::kRays);
+    if (args.routing == "bricks" && router->routing() != client::ReplicaRouting::kBricks) {
+      return report_command_error("query",
+                                  "--routing bricks: the replicas do not list their bricks (a server before "
+                                  "SceneInfo.bricks); use --routing rays");
+    }
   }
 
   client::CallOptions options;
@@ -140,8 +147,8 @@ void add_query_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<QueryArgs>();
   CLI::App* cmd = app.add_subcommand("query", "Trace a rays .npy on an `outcore serve` server");
   cmd->add_option("--server", args->server,
-                  "HOST:PORT of the server, or replicas HOST:PORT,HOST:PORT,... (batches routed by ray; "
-                  "docs/SCALING.md)")
+                  "HOST:PORT of the server, or replicas HOST:PORT,HOST:PORT,... or dns:///NAME:PORT "
+                  "(docs/SCALING.md)")
       ->capture_default_str();
   cmd->add_option("--rays", args->rays_path, "Rays .npy: float32 (N,6) or (N,8)")->required();
   cmd->add_option("-o,--output", args->output_path, "Hits .npy to write (bool .npy with --any-hit)")
@@ -171,6 +178,12 @@ void add_query_command(CLI::App& app, int& exit_code) {
          "Hit fields the replies carry over the bytes path: all (32 bytes a ray), t (4) or t,ids (12); "
          "the others are written as a miss's (ids 4294967295, u = v = 0, zero normal)")
       ->check(CLI::IsMember({"all", "t", "t,ids"}))
+      ->capture_default_str();
+  cmd->add_option("--routing", args->routing,
+                  "With replicas: bricks (each replica owns a part of the bricks and traces every ray in it; "
+                  "the nearest answer is kept: each brick built on one replica) or rays (each ray to one "
+                  "replica by the cell where it enters the scene)")
+      ->check(CLI::IsMember({"bricks", "rays"}))
       ->capture_default_str();
   cmd->callback([args, &exit_code] { exit_code = run_query(*args); });
 }

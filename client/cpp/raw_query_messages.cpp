@@ -122,6 +122,13 @@ RawQueryRequest encode_query_request(std::span<const Ray> rays, const QueryReque
     put_tag(tail, 7, kVarint);
     put_varint(tail, static_cast<uint64_t>(fields.hit_fields));
   }
+  if (!fields.only_bricks.empty()) {
+    std::string packed;
+    for (const uint32_t brick : fields.only_bricks) put_varint(packed, brick);
+    put_tag(tail, 8, kLength);
+    put_varint(tail, packed.size());
+    tail += packed;
+  }
   std::vector<grpc::Slice> slices;
   slices.emplace_back(head);
   if (!rays.empty()) slices.emplace_back(rays.data(), ray_bytes, grpc::Slice::STATIC_SLICE);

@@ -40,6 +40,7 @@ struct QueryRequestFields {
   bool no_reorder = false;
   uint64_t sequence = 0;
   v1::HitFields hit_fields = v1::HIT_FIELDS_ALL;
+  std::span<const uint32_t> only_bricks;  // packed field 8; empty: left out
 };
 
 // A QueryRequest of F32X8 `rays` (referenced, not copied).

@@ -43,6 +43,21 @@ uint64_t ring_hash(std::string_view text) {
   return h ^ (h >> 31);
 }
 
+uint64_t brick_ring_position(uint32_t brick, const Vec3f& brick_lo, const Vec3f& brick_hi, const Vec3f& lo,
+                             const Vec3f& hi) {
+  const double centre[3] = {(double(brick_lo.x) + brick_hi.x) / 2, (double(brick_lo.y) + brick_hi.y) / 2,
+                            (double(brick_lo.z) + brick_hi.z) / 2};
+  const double low[3] = {lo.x, lo.y, lo.z};
+  const double high[3] = {hi.x, hi.y, hi.z};
+  uint64_t code = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double extent = high[a] > low[a] ? high[a] - low[a] : 1.0;
+    const double cell = std::clamp(std::floor((centre[a] - low[a]) / extent * 128), 0.0, 127.0);
+    code |= spread_bits(static_cast<uint64_t>(cell)) << a;
+  }
+  return code << 43 | ring_hash("brick:" + std::to_string(brick)) >> 21;
+}
+
 std::array<uint32_t, 3> route_grid(const Vec3f& lo, const Vec3f& hi, uint32_t cells) {
   const double extent[3] = {std::max(0.0, double(hi.x) - lo.x), std::max(0.0, double(hi.y) - lo.y),
                             std::max(0.0, double(hi.z) - lo.z)};

@@ -25,6 +25,12 @@ inline constexpr uint32_t kRingVirtualNodes = 4;
 inline constexpr uint32_t kRouteCells = 8;
 inline constexpr double kRouteLoadFactor = 1.25;
 inline constexpr uint64_t kMissBlockRays = 8192;
+// Routing by brick: each replica's part within this x an even share of the
+// triangles (a part must fit a replica's share of the cache), and more
+// points a replica so that one joining takes close to 1/(N+1) of the bricks
+// (outcore/_routing.py BRICK_LOAD_FACTOR, BRICK_VIRTUAL_NODES).
+inline constexpr double kBrickLoadFactor = 1.01;
+inline constexpr uint32_t kBrickVirtualNodes = 64;
 
 // FNV-1a 64 over the bytes, then the SplitMix64 finaliser.
 uint64_t ring_hash(std::string_view text);
@@ -37,6 +43,12 @@ std::array<uint32_t, 3> route_grid(const Vec3f& lo, const Vec3f& hi, uint32_t ce
 // get hashed positions by blocks of kMissBlockRays.
 std::vector<uint64_t> route_keys(std::span<const Ray> rays, const Vec3f& lo, const Vec3f& hi,
                                  uint32_t cells = kRouteCells);
+
+// A brick's place on the ring (routing by brick): the Morton code of its
+// box's centre on a 128^3 grid over the scene's box (lo, hi), with the hash
+// of "brick:ID" below it, so that no two bricks share a place.
+uint64_t brick_ring_position(uint32_t brick, const Vec3f& brick_lo, const Vec3f& brick_hi, const Vec3f& lo,
+                             const Vec3f& hi);
 
 class ReplicaRing {
  public:

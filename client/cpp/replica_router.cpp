@@ -34,6 +34,15 @@ Status call(SceneClient& client, std::span<const Ray> rays, std::span<uint8_t> o
   return client.occluded(rays, out, options, stats);
 }
 
+// A part's answer merged into the batch's: the nearer hit under the
+// engine's tie rule (smaller t, geometry id, primitive id); occlusion ORed.
+void keep_nearest(Hit& into, const Hit& part) {
+  if (part.is_hit() && hit_is_better(part.t, part.geometry_id, part.primitive_id, into)) into = part;
+}
+void keep_nearest(uint8_t& into, uint8_t part) {
+  into = static_cast<uint8_t>(into | part);
+}
+
 }  // namespace
 
 namespace {
@@ -131,6 +140,21 @@ Expected<std::unique_ptr<ReplicaRouter>> ReplicaRouter::connect(const std::vecto
     router->lo_ = {info.bounds_lo(0), info.bounds_lo(1), info.bounds_lo(2)};
     router->hi_ = {info.bounds_hi(0), info.bounds_hi(1), info.bounds_hi(2)};
   }
+  for (int b = 0; b < info.bricks_size(); ++b) {
+    const v1::BrickSummary& brick = info.bricks(b);
+    if (brick.bounds_lo_size() != 3 || brick.bounds_hi_size() != 3)
+      return data_loss("SceneInfo: brick " + std::to_string(b) + " has no box");
+    const Vec3f lo{brick.bounds_lo(0), brick.bounds_lo(1), brick.bounds_lo(2)};
+    const Vec3f hi{brick.bounds_hi(0), brick.bounds_hi(1), brick.bounds_hi(2)};
+    router->bricks_.push_back(
+        {brick_ring_position(static_cast<uint32_t>(b), lo, hi, router->lo_, router->hi_),
+         std::max<uint64_t>(1, brick.triangle_count())});
+  }
+  if (router->bricks_.size() != info.brick_count()) {
+    // A server from before SceneInfo.bricks: only routing by ray is possible.
+    router->routing_ = ReplicaRouting::kRays;
+    router->bricks_.clear();
+  }
   return router;
 }
 
@@ -188,18 +212,38 @@ uint64_t ReplicaRouter::failovers() const {
   return failovers_;
 }
 
-std::vector<uint32_t> ReplicaRouter::route(const Members& members, std::span<const Ray> rays) const {
-  std::vector<std::string> live;
-  std::vector<uint32_t> index_of_live;
-  {
-    std::lock_guard lock(mutex_);
-    for (uint32_t r = 0; r < members.replicas.size(); ++r) {
-      if (!down_.contains(members.replicas[r])) {
-        live.push_back(members.replicas[r]);
-        index_of_live.push_back(r);
-      }
-    }
+std::vector<uint32_t> ReplicaRouter::live(const Members& members) const {
+  std::vector<uint32_t> up;
+  std::lock_guard lock(mutex_);
+  for (uint32_t r = 0; r < members.replicas.size(); ++r) {
+    if (!down_.contains(members.replicas[r])) up.push_back(r);
   }
+  return up;
+}
+
+std::vector<std::vector<uint32_t>> ReplicaRouter::share_bricks(const Members& members) const {
+  const std::vector<uint32_t> index_of_live = live(members);
+  std::vector<std::vector<uint32_t>> parts(members.replicas.size());
+  if (index_of_live.empty()) return parts;
+  std::vector<std::string> names;
+  for (const uint32_t r : index_of_live) names.push_back(members.replicas[r]);
+  const ReplicaRing ring(names, kBrickVirtualNodes);  // sorted like members.replicas
+  std::map<uint64_t, uint64_t> weights;
+  for (const BrickPlace& brick : bricks_) weights[brick.position] = brick.triangles;
+  const std::map<uint64_t, uint32_t> owner = ring.assign(weights, kBrickLoadFactor);
+  for (uint32_t b = 0; b < bricks_.size(); ++b)
+    parts[index_of_live[owner.at(bricks_[b].position)]].push_back(b);
+  return parts;
+}
+
+std::vector<std::vector<uint32_t>> ReplicaRouter::plan_bricks() const {
+  return share_bricks(*members());
+}
+
+std::vector<uint32_t> ReplicaRouter::route(const Members& members, std::span<const Ray> rays) const {
+  const std::vector<uint32_t> index_of_live = live(members);
+  std::vector<std::string> live;
+  for (const uint32_t r : index_of_live) live.push_back(members.replicas[r]);
   std::vector<uint32_t> replica_of_ray(rays.size(), 0);
   if (live.empty()) return replica_of_ray;
   const ReplicaRing ring(live);  // sorted like members.replicas, so indices map through index_of_live
@@ -231,6 +275,7 @@ Status ReplicaRouter::run(std::span<const Ray> rays, std::span<Answer> out, cons
                                       [&](const std::string& address) { return down_.contains(address); });
     if (all_down) down_.clear();  // all down: try them all again
   }
+  if (routing_ == ReplicaRouting::kBricks) return run_by_bricks(members, rays, out, options, stats);
   const std::vector<uint32_t> replica_of_ray = route(members, rays);
   struct Part {
     uint32_t replica;
@@ -251,24 +296,8 @@ Status ReplicaRouter::run(std::span<const Ray> rays, std::span<Answer> out, cons
     for (std::size_t k = 0; k < part.index.size(); ++k) part.rays[k] = rays[part.index[k]];
     part.answers.resize(part.index.size());
     running.push_back(std::async(std::launch::async, [&, p = &part] {
-      // A replica that cannot be reached: the part goes to the next on the ring.
-      std::set<uint32_t> tried;
-      while (true) {
-        tried.insert(p->replica);
-        p->stats = CallStats{};
-        p->status = call(*members.clients[p->replica], p->rays, p->answers, part_options, &p->stats);
-        if (p->status.ok() || p->status.code() != StatusCode::kIoError) return;
-        std::lock_guard lock(mutex_);
-        down_.insert(members.replicas[p->replica]);
-        const std::vector<uint32_t> next =
-            ReplicaRing(members.replicas).walk(ring_hash(members.replicas[p->replica]));
-        const auto candidate = std::find_if(next.begin(), next.end(), [&](uint32_t r) {
-          return !tried.contains(r) && !down_.contains(members.replicas[r]);
-        });
-        if (candidate == next.end()) return;  // every replica failed: the part's error stands
-        p->replica = *candidate;
-        ++failovers_;
-      }
+      p->status =
+          call_with_failover<Answer>(members, p->replica, p->rays, p->answers, part_options, p->stats);
     }));
   }
   for (auto& task : running) task.get();
@@ -278,6 +307,69 @@ Status ReplicaRouter::run(std::span<const Ray> rays, std::span<Answer> out, cons
     for (std::size_t k = 0; k < part.index.size(); ++k) out[part.index[k]] = part.answers[k];
     add_call_stats(part.stats, stats);
   }
+  return Status::Ok();
+}
+
+template <class Answer>
+Status ReplicaRouter::call_with_failover(const Members& members, uint32_t& replica, std::span<const Ray> rays,
+                                         std::span<Answer> out, const CallOptions& options,
+                                         CallStats& stats) {
+  std::set<uint32_t> tried;
+  while (true) {
+    tried.insert(replica);
+    stats = CallStats{};
+    const Status status = call(*members.clients[replica], rays, out, options, &stats);
+    if (status.ok() || status.code() != StatusCode::kIoError) return status;
+    std::lock_guard lock(mutex_);
+    down_.insert(members.replicas[replica]);
+    const std::vector<uint32_t> next =
+        ReplicaRing(members.replicas).walk(ring_hash(members.replicas[replica]));
+    const auto candidate = std::find_if(next.begin(), next.end(), [&](uint32_t r) {
+      return !tried.contains(r) && !down_.contains(members.replicas[r]);
+    });
+    if (candidate == next.end()) return status;  // every replica failed: the part's error stands
+    replica = *candidate;
+    ++failovers_;
+  }
+}
+
+template <class Answer>
+Status ReplicaRouter::run_by_bricks(const Members& members, std::span<const Ray> rays, std::span<Answer> out,
+                                    const CallOptions& options, CallStats* stats) {
+  struct Part {
+    uint32_t replica;
+    CallOptions options;
+    std::vector<Answer> answers;
+    CallStats stats;
+    Status status;
+  };
+  const std::vector<std::vector<uint32_t>> shares = share_bricks(members);
+  std::vector<Part> parts;
+  for (uint32_t r = 0; r < shares.size(); ++r) {
+    if (shares[r].empty()) continue;
+    Part& part = parts.emplace_back(Part{r, options, {}, {}, {}});
+    part.options.only_bricks = shares[r];
+    part.options.progress = nullptr;  // one part's progress is not the batch's
+  }
+  // The first part answers into `out`, the others into their own, merged.
+  for (std::size_t k = 1; k < parts.size(); ++k) parts[k].answers.resize(rays.size());
+  std::vector<std::future<void>> running;
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    running.push_back(std::async(std::launch::async, [&, p = &parts[k], k] {
+      const std::span<Answer> answers = k == 0 ? out : std::span<Answer>(p->answers);
+      p->status = call_with_failover<Answer>(members, p->replica, rays, answers, p->options, p->stats);
+    }));
+  }
+  for (auto& task : running) task.get();
+  for (std::size_t k = 0; k < parts.size(); ++k) {
+    Part& part = parts[k];
+    OUTCORE_RETURN_IF_ERROR(part.status.with_context("replica " + members.replicas[part.replica]));
+    if (k > 0) {
+      for (std::size_t i = 0; i < rays.size(); ++i) keep_nearest(out[i], part.answers[i]);
+    }
+    add_call_stats(part.stats, stats);
+  }
+  if (options.progress != nullptr) options.progress->advance(rays.size());
   return Status::Ok();
 }
 

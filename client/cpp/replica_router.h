@@ -1,6 +1,10 @@
-// A SceneClient over replicas (issue 30, docs/SCALING.md): each batch split
-// by routing key (replica_ring.h), the parts sent to their replicas in
-// parallel, the answers put back in input order; a part whose replica is
+// A SceneClient over replicas (issue 30, docs/SCALING.md). Routing by brick
+// (the default): the scene's bricks are shared out on the ring
+// (replica_ring.h), every replica traces the whole batch in its own bricks
+// (CallOptions::only_bricks) and the nearest answer is kept (the engine's
+// tie rule; occlusion ORed), so each brick is built on one replica. Routing
+// by ray: each batch split by routing key, the parts sent to their replicas
+// in parallel, the answers put back in input order. A part whose replica is
 // unreachable (UNAVAILABLE, reported as IO_ERROR) goes to the next replica on
 // the ring, and that replica is left out of later batches. Any replica
 // answers any ray the same: routing changes cache hits and speed, never an
@@ -25,6 +29,8 @@
 #include "client/cpp/scene_client.h"
 
 namespace outcore::client {
+
+enum class ReplicaRouting { kBricks, kRays };
 
 class ReplicaRouter {
  public:
@@ -52,8 +58,15 @@ class ReplicaRouter {
   Status occluded(std::span<const Ray> rays, std::span<uint8_t> occluded, const CallOptions& options = {},
                   CallStats* stats = nullptr);
 
+  // Before the first batch (not thread-safe against running batches).
+  void set_routing(ReplicaRouting routing) { routing_ = routing; }
+  ReplicaRouting routing() const { return routing_; }
+
   // Parts the last batches sent again to another replica.
   uint64_t failovers() const;
+  // Routing by brick: each live replica's bricks (by sorted address; empty
+  // for a replica down).
+  std::vector<std::vector<uint32_t>> plan_bricks() const;
   // How many rays of each replica (by sorted address) the batch would send.
   std::vector<uint64_t> plan_loads(std::span<const Ray> rays) const;
   std::vector<std::string> replicas() const;
@@ -75,12 +88,31 @@ class ReplicaRouter {
   void refresh_members();
   template <class Answer>
   Status run(std::span<const Ray> rays, std::span<Answer> out, const CallOptions& options, CallStats* stats);
+  template <class Answer>
+  Status run_by_bricks(const Members& members, std::span<const Ray> rays, std::span<Answer> out,
+                       const CallOptions& options, CallStats* stats);
+  // Calls `replica` (updated) and, while it is unreachable, the next ones up
+  // on the ring, each marked down.
+  template <class Answer>
+  Status call_with_failover(const Members& members, uint32_t& replica, std::span<const Ray> rays,
+                            std::span<Answer> out, const CallOptions& options, CallStats& stats);
+  // The replicas up (indices into members.replicas).
+  std::vector<uint32_t> live(const Members& members) const;
   // Each ray's replica (index into members.replicas) among those up.
   std::vector<uint32_t> route(const Members& members, std::span<const Ray> rays) const;
+  // Each live replica's bricks (by index into members.replicas).
+  std::vector<std::vector<uint32_t>> share_bricks(const Members& members) const;
+
+  struct BrickPlace {
+    uint64_t position;  // brick_ring_position
+    uint64_t triangles;
+  };
 
   ConnectOptions options_;
+  ReplicaRouting routing_ = ReplicaRouting::kBricks;
   Vec3f lo_, hi_;
-  Resolver resolver_;  // empty for a fixed list
+  std::vector<BrickPlace> bricks_;  // by brick id (SceneInfo.bricks)
+  Resolver resolver_;               // empty for a fixed list
   std::chrono::milliseconds refresh_{kResolveEvery};
   std::mutex refresh_mutex_;  // one resolution at a time
   std::chrono::steady_clock::time_point next_refresh_;

@@ -117,6 +117,7 @@ void fill_request(std::span<const Ray> rays, uint64_t sequence, const CallOption
   request.set_strict(options.strict);
   request.set_no_reorder(options.no_reorder);
   request.set_sequence(sequence);
+  request.mutable_only_bricks()->Add(options.only_bricks.begin(), options.only_bricks.end());
 }
 
 // The hit fields a request asks for (closest hits only), and the bytes of
@@ -432,6 +433,7 @@ Status SceneClient::run_shared(std::span<const Ray> rays, std::span<uint8_t> out
   batch->set_ray_count(n);
   request.set_strict(options.strict);
   request.set_no_reorder(options.no_reorder);
+  request.mutable_only_bricks()->Add(options.only_bricks.begin(), options.only_bricks.end());
   v1::SharedPayload* shared = request.mutable_shared();
   shared->set_name((*object)->name());
   shared->set_rays_offset(kRaysOffset);
@@ -501,6 +503,7 @@ Status SceneClient::run(std::span<const Ray> rays, std::span<uint8_t> out, uint3
   fields.strict = options.strict;
   fields.no_reorder = options.no_reorder;
   fields.hit_fields = hit_fields_of(static_cast<const Response*>(nullptr), options);
+  fields.only_bricks = options.only_bricks;
   std::vector<uint8_t> scratch;  // packed answers, when fewer fields than a Hit's come
   const auto take = [&](const RawQueryReply& reply, uint64_t first, uint64_t count, uint64_t sequence) {
     return take_reply(reply, count, sequence, wire_bytes, out_bytes_per_ray, fields.hit_fields,

@@ -74,6 +74,9 @@ struct CallOptions {
   // normal), so with HIT_FIELDS_T test hits by a finite t. Shared-memory
   // calls always answer whole records.
   v1::HitFields hit_fields = v1::HIT_FIELDS_ALL;
+  // Trace only these bricks (QueryRequest.only_bricks: a replica's part of
+  // the scene); empty: every brick.
+  std::vector<uint32_t> only_bricks;
   // Advanced by the rays of each reply as it arrives (a stream's chunk by
   // chunk; a unary or shared-memory call at its end); null: none.
   ProgressBar* progress = nullptr;

@@ -7,7 +7,8 @@ namespace {
 // scene is not traced through a resident set.
 std::string_view why_no_set(const QueryOptions& options, const BatchFacts& facts) {
   if (!options.brick_set) return "every brick resident, few bricks; the resident set is off";
-  if (!options.only_bricks.empty()) return "every brick resident, few bricks; the batch traces a part of them";
+  if (!options.only_bricks.empty())
+    return "every brick resident, few bricks; the batch traces a part of them";
   if (facts.resident_set_max_bricks == 0)
     return "every brick resident, few bricks; the brick structure offers no resident set";
   if (facts.brick_count == 0) return "every brick resident, few bricks; the scene has no bricks";
@@ -34,8 +35,8 @@ BatchPlan plan_batch(const QueryOptions& options, const BatchFacts& facts) {
   const bool all_resident = facts.cache_fits_scene && facts.resident_bricks == facts.brick_count;
   const bool few_bricks = facts.brick_count <= kChunkedMaxBricks;
   if (all_resident && options.brick_set && options.only_bricks.empty() &&
-      facts.brick_count <= facts.resident_set_max_bricks &&
-      facts.brick_count > 0 && facts.rays >= options.brick_set_min_rays) {
+      facts.brick_count <= facts.resident_set_max_bricks && facts.brick_count > 0 &&
+      facts.rays >= options.brick_set_min_rays) {
     return {BatchStrategy::kResidentSet,
             "every brick resident, a resident set offered for them, a large batch"};
   }

@@ -147,8 +147,9 @@ Status QueryEngine::all_hits(std::span<const Ray> rays, std::span<uint32_t> coun
                              QueryStats* stats) {
   if (counts.size() != rays.size()) return invalid_argument("hit counts and rays differ in length");
   if (!options.only_bricks.empty()) {
-    return invalid_argument("only_bricks is for closest-hit and any-hit queries (Intersect, Occluded), not "
-                            "every-hit ones: leave it empty");
+    return invalid_argument(
+        "only_bricks is for closest-hit and any-hit queries (Intersect, Occluded), not "
+        "every-hit ones: leave it empty");
   }
   AllHitsCollector collector;
   // Neither the resident set nor trace-ahead keeps every hit.

@@ -167,14 +167,15 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
 
     Replicas (docs/SCALING.md): `address` may be a list of "host:port"
     strings or a "dns:///NAME:PORT" target. routing="bricks" (the default)
-    shares the scene's bricks out among the replicas on a ring (each
-    replica's part within load_factor x an even share of the triangles),
+    shares the scene's bricks out among the replicas on a ring (64 points a
+    replica; each replica's part within load_factor x an even share of the
+    triangles),
     sends every batch to each replica for its own bricks
     (QueryRequest.only_bricks) and keeps the nearest answer, so each brick
     is built on one replica only; routing="rays" sends each ray to one
     replica by the cell where it enters the scene (route_cells a side),
     within load_factor x an even share of the rays. load_factor defaults to
-    1.05 for bricks and 1.25 for rays.
+    1.01 for bricks and 1.25 for rays.
     """
 
     def __init__(self, address, timeout: float | None = None, max_message_mb: float = 64,
@@ -191,7 +192,7 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
             if routing not in ("bricks", "rays"):
                 raise ValueError(f"routing must be 'bricks' or 'rays', got {routing!r}")
             if load_factor is None:
-                load_factor = 1.05 if routing == "bricks" else 1.25
+                load_factor = _routing.BRICK_LOAD_FACTOR if routing == "bricks" else 1.25
             if isinstance(load_factor, bool) or not (load_factor >= 1 and math.isfinite(load_factor)):
                 raise ValueError(f"load_factor must be a number >= 1, got {load_factor!r}")
             options = dict(timeout=timeout, max_message_mb=max_message_mb, chunk_rays=chunk_rays,
