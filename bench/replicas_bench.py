@@ -32,8 +32,11 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import remote_bench  # noqa: E402
 from common import OUTCORE, ROOT, prepare_store, run  # noqa: E402
 
-SCENE = ["gen:city?copies=400", "--brick-tris", "8192"]
-BUDGET_MB = 9  # the city of 400 copies builds to 36.3 MiB with bvh bricks (81 bricks): 4.0x this
+SCENE = "gen:city?copies=400"
+# The city of 400 copies builds to 36.3 MiB with bvh bricks of 8,192
+# triangles (81 bricks), to 37.0 MiB with bricks of 2,048 (326): 4.0x and
+# 4.1x this.
+BUDGET_MB = 9
 
 
 def builds(clients):
@@ -109,10 +112,14 @@ def main():
     ap.add_argument("--work", default=os.path.join(ROOT, "build", "bench-replicas"))
     ap.add_argument("--route-cells", type=int, default=8, help="SceneClient(route_cells=): the key grid's side")
     ap.add_argument("--configs", help="semicolon-separated configuration names to run (default: all)")
+    ap.add_argument("--budget-mb", type=int, default=BUDGET_MB, help="B, each replica's --cache-mb")
+    ap.add_argument("--brick-tris", type=int, default=8192,
+                    help="pack --brick-tris (smaller bricks: a replica's build headroom is a smaller share of B)")
     ap.add_argument("--json")
     a = ap.parse_args()
     os.makedirs(a.work, exist_ok=True)
-    store, info = prepare_store(OUTCORE, a.work, "city400", SCENE[:1], SCENE[1:])
+    name = "city400" if a.brick_tris == 8192 else f"city400-b{a.brick_tris}"
+    store, info = prepare_store(OUTCORE, a.work, name, [SCENE], ["--brick-tris", str(a.brick_tris)])
     with open(info) as f:
         bounds_info = json.load(f)["bounds"]
     bounds = (bounds_info["min"], bounds_info["max"])
@@ -125,12 +132,13 @@ def main():
                  "--seed", str(100 + k)])
             batches.append(np.load(path))
         reference = None
-        for name, replicas, budget, mode in (("one server, 4B", 1, 4 * BUDGET_MB, "single"),
-                                             ("4 replicas, by brick", 4, BUDGET_MB, "bricks"),
-                                             ("4 replicas, by ray", 4, BUDGET_MB, "rays"),
-                                             ("4 replicas, round-robin", 4, BUDGET_MB, "round-robin"),
-                                             ("2 replicas, by brick", 2, BUDGET_MB, "bricks"),
-                                             ("1 replica, B", 1, BUDGET_MB, "single")):
+        b = a.budget_mb
+        for name, replicas, budget, mode in (("one server, 4B", 1, 4 * b, "single"),
+                                             ("4 replicas, by brick", 4, b, "bricks"),
+                                             ("4 replicas, by ray", 4, b, "rays"),
+                                             ("4 replicas, round-robin", 4, b, "round-robin"),
+                                             ("2 replicas, by brick", 2, b, "bricks"),
+                                             ("1 replica, B", 1, b, "single")):
             if a.configs and name not in a.configs.split(";") and name != "one server, 4B":
                 continue
             row, answers = run_config(name, store, batches, budget, replicas, mode, a.route_cells)
@@ -151,7 +159,7 @@ def main():
     moves["bricks"] = {f"{n}->{n + 1}": moved_keys(None, bounds, n, n + 1, a.route_cells, bricks,
                                                    _routing.BRICK_LOAD_FACTOR, _routing.BRICK_VIRTUAL_NODES)
                        for n in (3, 4)}
-    print(f"\nscene gen:city?copies=400 (bvh bricks, 36.3 MiB built), B = {BUDGET_MB} MiB; {a.batches} batches "
+    print(f"\nscene {SCENE}, bricks of {a.brick_tris} triangles (bvh), B = {a.budget_mb} MiB; {a.batches} batches "
           f"of {a.rays:,} rays a kind; builds summed over the replicas; {os.cpu_count()} cores shared by all\n")
     print("| rays | configuration | builds: first batch / each later (mean) / all | all vs one server 4B | "
           "M rays/s (later batches) | peak load / mean | peak resident MiB (one server) | answers = one server |")
@@ -164,7 +172,8 @@ def main():
               f"{load} | {r['peak_resident_mib']:.1f} | {'yes' if r['same_answers'] else 'NO'} |")
     for kind, m in moves.items():
         for step, (keys, rays) in m.items():
-            print(f"{kind}: {step} replicas moves {keys:.3f} of the keys ({rays:.3f} of the rays)")
+            weight = "triangles" if kind == "bricks" else "rays"
+            print(f"{kind}: {step} replicas moves {keys:.3f} of the keys ({rays:.3f} of the {weight})")
     if a.json:
         with open(a.json, "w") as f:
             json.dump(dict(rows=rows, moved=moves), f, indent=1)
