@@ -42,6 +42,12 @@ void keep_nearest(Hit& into, const Hit& part) {
 void keep_nearest(uint8_t& into, uint8_t part) {
   into = static_cast<uint8_t>(into | part);
 }
+bool answered_hit(const Hit& hit) {
+  return hit.is_hit();
+}
+bool answered_hit(uint8_t occluded) {
+  return occluded != 0;
+}
 
 }  // namespace
 
@@ -368,6 +374,16 @@ Status ReplicaRouter::run_by_bricks(const Members& members, std::span<const Ray>
       for (std::size_t i = 0; i < rays.size(); ++i) keep_nearest(out[i], part.answers[i]);
     }
     add_call_stats(part.stats, stats);
+  }
+  if (stats != nullptr && !parts.empty()) {
+    // Every replica saw every ray: the batch's own counts, not their sum.
+    const v1::QueryStats& first = parts.front().stats.engine;
+    stats->engine.set_rays(first.rays());
+    stats->engine.set_invalid_rays(first.invalid_rays());
+    stats->engine.set_rays_entering_no_brick(first.rays_entering_no_brick());
+    uint64_t hit = 0;
+    for (const Answer& answer : out) hit += answered_hit(answer);
+    stats->engine.set_rays_hit(hit);
   }
   if (options.progress != nullptr) options.progress->advance(rays.size());
   return Status::Ok();

@@ -459,6 +459,13 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
             for key, value in (stats or {}).items():
                 if isinstance(value, (int, float)) and not isinstance(value, bool):
                     totals[key] = totals.get(key, 0) + value
+        if self._router.routing == "bricks" and parts and parts[0][0]:
+            # Every replica saw every ray: the batch's own counts, not their sum.
+            for key in ("rays", "invalid_rays", "rays_entering_no_brick"):
+                if key in parts[0][0]:
+                    totals[key] = parts[0][0][key]
+            hit = np.isfinite(out["t_hit"]) if out.dtype.names else out != 0
+            totals["rays_hit"] = int(np.count_nonzero(hit))
         self.last_stats = totals
         self._last_call_shared = any(shared for _, shared, _ in parts)
         self.last_dynamic_version = max(version for _, _, version in parts)
