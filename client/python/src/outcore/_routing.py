@@ -1,7 +1,17 @@
 """Cache-affinity routing over replicas (issue 30): every replica serves the
 whole scene from the same store, so any replica answers any ray the same;
-sending the rays that need the same bricks to the same replica makes the
-replicas' caches add up instead of each holding the whole working set.
+having each brick traced on one replica makes the replicas' caches add up
+instead of each holding the whole working set (docs/SCALING.md).
+
+By brick (routing="bricks", the default): the bricks (SceneInfo.bricks) are
+placed on the ring by the Morton code of their centres (brick_positions),
+each replica 64 points, and shared out with bounded load 1.01 over their
+triangles (plan_bricks); every replica gets the whole batch with its part
+as QueryRequest.only_bricks, and the answers are merged ray by ray under
+the engine's tie rule (merge_nearest). A part whose replica fails goes to
+the next replica on the ring.
+
+By ray (routing="rays"):
 
 - The key of a ray is the cell of a grid over the scene's box (SceneInfo
   bounds) where the ray enters the box: `cells` (8) along the box's longest
