@@ -6,6 +6,8 @@ Thread-safety: pure functions.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 RAY_COLUMNS = (6, 8)
@@ -50,3 +52,22 @@ def _real_numbers(values, name: str, shape: str) -> np.ndarray:
     if arr.dtype.kind not in "fiu":
         raise ValueError(f"{name} must have a real numeric dtype (float32 preferred), got dtype {arr.dtype}")
     return arr
+
+
+def rays_with_segment(rays, tnear, tfar) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Wire rays with tnear/tfar (test_occlusions' arguments) as columns 7-8."""
+    flat, batch_shape = as_wire_rays(rays)
+    for name, value in (("tnear", tnear), ("tfar", tfar)):
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or \
+                math.isnan(value):
+            raise ValueError(f"{name} must be a number, got {value!r}")
+    if tnear == 0.0 and tfar == math.inf:
+        return flat, batch_shape
+    if flat.shape[1] == 8:
+        raise ValueError("rays of shape (..., 8) carry their own tnear and tfar; "
+                         "give tnear/tfar either there or as arguments, not both")
+    full = np.empty((flat.shape[0], 8), dtype="<f4")
+    full[:, :6] = flat
+    full[:, 6] = tnear
+    full[:, 7] = tfar
+    return full, batch_shape

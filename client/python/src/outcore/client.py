@@ -51,7 +51,7 @@ import numpy as np
 import numpy.lib.recfunctions  # noqa: F401  (np.lib.recfunctions)
 
 from . import _routing, _shared, _wire
-from ._rays import as_wire_rays
+from ._rays import as_wire_rays, rays_with_segment
 from ._security import make_channel
 from ._messages import add_fields
 from ._messages import message_to_dict as _message_to_dict
@@ -109,25 +109,6 @@ def _refused(error: grpc.RpcError) -> bool:
     return any((key, value) == _SHARED_REFUSED for key, value in trailers)
 
 
-def _rays_with_segment(rays, tnear, tfar) -> tuple[np.ndarray, tuple[int, ...]]:
-    """Wire rays with tnear/tfar (test_occlusions' arguments) as columns 7-8."""
-    flat, batch_shape = as_wire_rays(rays)
-    for name, value in (("tnear", tnear), ("tfar", tfar)):
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or \
-                math.isnan(value):
-            raise ValueError(f"{name} must be a number, got {value!r}")
-    if tnear == 0.0 and tfar == math.inf:
-        return flat, batch_shape
-    if flat.shape[1] == 8:
-        raise ValueError("rays of shape (..., 8) carry their own tnear and tfar; "
-                         "give tnear/tfar either there or as arguments, not both")
-    full = np.empty((flat.shape[0], 8), dtype="<f4")
-    full[:, :6] = flat
-    full[:, 6] = tnear
-    full[:, 7] = tfar
-    return full, batch_shape
-
-
 class _Query:
     """What differs between closest-hit and any-hit queries."""
 
@@ -166,16 +147,11 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
     Bearer TOKEN" on every call (serve --auth-token-file). All keyword-only.
 
     Replicas (docs/SCALING.md): `address` may be a list of "host:port"
-    strings or a "dns:///NAME:PORT" target. routing="bricks" (the default)
-    shares the scene's bricks out among the replicas on a ring (64 points a
-    replica; each replica's part within load_factor x an even share of the
-    triangles),
-    sends every batch to each replica for its own bricks
-    (QueryRequest.only_bricks) and keeps the nearest answer, so each brick
-    is built on one replica only; routing="rays" sends each ray to one
-    replica by the cell where it enters the scene (route_cells a side),
-    within load_factor x an even share of the rays. load_factor defaults to
-    1.01 for bricks and 1.25 for rays.
+    strings or a "dns:///NAME:PORT" target; routing="bricks" (the default:
+    each replica traces every ray in its part of the bricks, the nearest
+    answer kept) or "rays" (each ray to one replica by its entry cell,
+    route_cells a side); load_factor (bricks 1.01, rays 1.25) bounds a
+    replica's share of the triangles or of the rays.
     """
 
     def __init__(self, address, timeout: float | None = None, max_message_mb: float = 64,
@@ -355,7 +331,7 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         then tnear/tfar must be left at their defaults). Other arguments as
         cast_rays (keyword-only)."""
         _check_nthreads(nthreads)
-        flat, batch_shape = _rays_with_segment(rays, tnear, tfar)
+        flat, batch_shape = rays_with_segment(rays, tnear, tfar)
         occluded = self._query(_OCCLUDED, flat, _QueryOptions(strict, _check_version(dynamic_version)))
         if occluded.size and occluded.max() > 1:
             raise OutcoreError("DATA_LOSS", "occlusion reply holds a byte that is neither 0 nor 1",
@@ -454,19 +430,7 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
 
         out = np.empty(rays.shape[0], dtype=query.record_dtype)
         parts = self._router.query(np.ascontiguousarray(rays), run_part, out)
-        totals: dict = {}
-        for stats, _, _ in parts:
-            for key, value in (stats or {}).items():
-                if isinstance(value, (int, float)) and not isinstance(value, bool):
-                    totals[key] = totals.get(key, 0) + value
-        if self._router.routing == "bricks" and parts and parts[0][0]:
-            # Every replica saw every ray: the batch's own counts, not their sum.
-            for key in ("rays", "invalid_rays", "rays_entering_no_brick"):
-                if key in parts[0][0]:
-                    totals[key] = parts[0][0][key]
-            hit = np.isfinite(out["t_hit"]) if out.dtype.names else out != 0
-            totals["rays_hit"] = int(np.count_nonzero(hit))
-        self.last_stats = totals
+        self.last_stats = _routing.combined_stats([stats for stats, _, _ in parts], self._router.routing, out)
         self._last_call_shared = any(shared for _, shared, _ in parts)
         self.last_dynamic_version = max(version for _, _, version in parts)
         self.last_replicas = len(parts)
