@@ -22,12 +22,7 @@ namespace OUTCORE_UNITY_ID {
 
 std::unique_ptr<QueryEngine> open_engine(const testing::PackedScene& scene, uint64_t cache_bytes,
                                          const std::string& brick_accel) {
-  EngineOptions options;
-  options.cache_bytes = cache_bytes;
-  options.brick_accel = brick_accel;
-  auto engine = QueryEngine::open(scene.path, options);
-  EXPECT_TRUE(engine.ok()) << engine.status().to_string();
-  return std::move(engine).value();
+  return testing::open_test_engine(scene, brick_accel, cache_bytes);
 }
 
 // A pinhole camera outside the box looking at its centre: coherent rays,

@@ -22,15 +22,7 @@ namespace OUTCORE_UNITY_ID {
 
 using testing::PackedScene;
 
-std::unique_ptr<QueryEngine> open_engine(const PackedScene& scene, const std::string& brick_accel,
-                                         uint64_t cache_bytes = uint64_t{1} << 30) {
-  EngineOptions options;
-  options.cache_bytes = cache_bytes;
-  options.brick_accel = brick_accel;
-  auto engine = QueryEngine::open(scene.path, options);
-  EXPECT_TRUE(engine.ok()) << engine.status().to_string();
-  return std::move(engine).value();
-}
+using testing::open_test_engine;
 
 Vec3f random_in(std::mt19937_64& rng, const Aabb& box, float grow) {
   return testing::random_point_in(rng, box, grow);
@@ -120,7 +112,7 @@ TEST(EveryHitQuery, CountsAndListsMatchFloat64BruteForceForEveryStructure) {
   const std::vector<Ray> rays = rays_through(scene->bounds, 1500, 7);
   for (const std::string accel : {"bvh", "embree", "kdtree", "grid", "octree", "reference", "auto"}) {
     SCOPED_TRACE(accel);
-    const auto engine = open_engine(*scene, accel);
+    const auto engine = open_test_engine(*scene, accel);
     expect_every_hit_matches_reference(*scene, *engine, rays);
   }
 }
@@ -132,7 +124,7 @@ TEST(EveryHitQuery, CountsAndListsMatchFloat64BruteForceForEveryStructure) {
 // above the built size for small bricks, so a quarter of the reservations
 // could hold the whole scene and never evict.
 uint64_t quarter_of_scene(const PackedScene& scene, const std::string& brick_accel) {
-  const auto full = open_engine(scene, brick_accel);
+  const auto full = open_test_engine(scene, brick_accel);
   const BrickBuilder& builder = full->cache().builder();
   uint64_t built = 0, largest = 0;
   for (uint32_t id = 0; id < full->store().manifest().bricks.size(); ++id) {
@@ -149,11 +141,11 @@ uint64_t quarter_of_scene(const PackedScene& scene, const std::string& brick_acc
 TEST(EveryHitQuery, AnswersAreTheSameUnderAQuarterBudgetAndWithoutReordering) {
   const auto scene = testing::pack_test_scene({"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=1.5"}, 128);
   const std::vector<Ray> rays = rays_through(scene->bounds, 3000, 11);
-  const auto full = open_engine(*scene, "bvh");
+  const auto full = open_test_engine(*scene, "bvh");
   std::vector<uint32_t> counts(rays.size());
   std::vector<RayHitRecord> records;
   ASSERT_TRUE(full->all_hits(rays, counts, &records, {}).ok());
-  const auto tight = open_engine(*scene, "bvh", quarter_of_scene(*scene, "bvh"));
+  const auto tight = open_test_engine(*scene, "bvh", quarter_of_scene(*scene, "bvh"));
   for (const bool reorder : {true, false}) {
     std::vector<uint32_t> tight_counts(rays.size());
     std::vector<RayHitRecord> tight_records;
@@ -179,7 +171,7 @@ TEST(EveryHitQuery, AnswersAreTheSameUnderAQuarterBudgetAndWithoutReordering) {
 
 TEST(EveryHitQuery, RefusedWhileTheDynamicLayerHoldsInstancesAndWrongLengths) {
   const auto scene = testing::pack_test_scene({"gen:sphere?level=2"}, 64);
-  const auto engine = open_engine(*scene, "bvh");
+  const auto engine = open_test_engine(*scene, "bvh");
   const std::vector<Ray> rays = rays_through(scene->bounds, 10, 3);
   std::vector<uint32_t> wrong(rays.size() + 1);
   EXPECT_EQ(engine->all_hits(rays, wrong, nullptr, {}).code(), StatusCode::kInvalidArgument);
@@ -231,7 +223,7 @@ TEST(ClosestPointQuery, MatchesFloat64BruteForceForEveryStructureAndBudget) {
     const uint64_t quarter = quarter_of_scene(*scene, accel);
     for (const uint64_t budget : {uint64_t{1} << 30, quarter}) {
       SCOPED_TRACE(accel + " budget " + std::to_string(budget));
-      const auto engine = open_engine(*scene, accel, budget);
+      const auto engine = open_test_engine(*scene, accel, budget);
       std::vector<ClosestPoint> got(points.size());
       QueryStats stats;
       ASSERT_TRUE(engine->closest_points(points, got, {}, &stats).ok());
@@ -258,7 +250,7 @@ TEST(ClosestPointQuery, MatchesFloat64BruteForceForEveryStructureAndBudget) {
 
 TEST(ClosestPointQuery, InvalidPointsAreCountedOrNamedUnderStrict) {
   const auto scene = testing::pack_test_scene({"gen:sphere?level=2"}, 64);
-  const auto engine = open_engine(*scene, "bvh");
+  const auto engine = open_test_engine(*scene, "bvh");
   std::vector<Vec3f> points = {{0.2f, 0.1f, 3.0f}, {NAN, 0, 0}, {0, 0, 1e19f}};
   std::vector<ClosestPoint> got(points.size());
   QueryStats stats;
@@ -293,7 +285,7 @@ std::string write_cube(const testing::TempDir& dir) {
 TEST(OccupancyQuery, ExactInsideACubeEvenWhereTheFirstRayMeetsAnEdgeOrVertex) {
   testing::TempDir dir;
   const auto scene = testing::pack_test_scene({write_cube(dir)}, 4);
-  const auto engine = open_engine(*scene, "bvh");
+  const auto engine = open_test_engine(*scene, "bvh");
   std::vector<Vec3f> points;
   std::vector<uint8_t> expected;
   std::mt19937_64 rng(3);
@@ -326,7 +318,7 @@ TEST(OccupancyQuery, ExactInsideACubeEvenWhereTheFirstRayMeetsAnEdgeOrVertex) {
 
 TEST(OccupancyQuery, InsideAndOutsideClosedMeshes) {
   const auto scene = testing::pack_test_scene({"gen:sphere?level=4", "gen:torus?nu=48&nv=24&cx=4"}, 128);
-  const auto engine = open_engine(*scene, "bvh", uint64_t{2} << 20);
+  const auto engine = open_test_engine(*scene, "bvh", uint64_t{2} << 20);
   std::vector<Vec3f> points;
   std::vector<uint8_t> expected;
   std::mt19937_64 rng(9);

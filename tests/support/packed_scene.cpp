@@ -7,6 +7,16 @@
 
 namespace outcore::testing {
 
+std::unique_ptr<QueryEngine> open_test_engine(const PackedScene& scene, const std::string& brick_accel,
+                                              uint64_t cache_bytes) {
+  EngineOptions options;
+  options.cache_bytes = cache_bytes;
+  options.brick_accel = brick_accel;
+  auto engine = QueryEngine::open(scene.path, options);
+  EXPECT_TRUE(engine.ok()) << engine.status().to_string();
+  return engine.ok() ? std::move(engine).value() : nullptr;
+}
+
 std::unique_ptr<PackedScene> pack_test_scene(const std::vector<std::string>& inputs,
                                              uint32_t brick_triangles) {
   auto scene = std::make_unique<PackedScene>();
