@@ -380,7 +380,6 @@ Status ReplicaRouter::run_by_bricks(const Members& members, std::span<const Ray>
     const v1::QueryStats& first = parts.front().stats.engine;
     stats->engine.set_rays(first.rays());
     stats->engine.set_invalid_rays(first.invalid_rays());
-    stats->engine.set_rays_entering_no_brick(first.rays_entering_no_brick());
     uint64_t hit = 0;
     for (const Answer& answer : out) hit += answered_hit(answer);
     stats->engine.set_rays_hit(hit);

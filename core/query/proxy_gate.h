@@ -16,9 +16,7 @@
 // Before the proxy, the brick's bound (BrickBounds, --brick-bounds) when
 // one beyond the upper hierarchy's boxes was chosen: it is cheap and tested
 // whether the brick is resident or not, since its point is to spare brick
-// visits that find nothing. Before both, the batch's part of the scene
-// (QueryOptions::only_bricks): a brick outside it is passed over as one no
-// ray can hit, never loaded or built. admits() is the whole gate.
+// visits that find nothing. admits() is the whole gate.
 //
 // Thread-safety: may_hit() and needs_no_test() run concurrently; the view of
 // resident bricks is written only between parallel phases.
@@ -26,7 +24,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <span>
 #include <vector>
 
 #include "core/proxy/proxy_set.h"
@@ -44,15 +41,6 @@ class ProxyGate {
         bounds_(bounds != nullptr && bounds->active() ? bounds : nullptr) {}
 
   const ProxySet* proxies() const { return proxies_; }
-
-  // The batch traces only `bricks` (ids below brick_count, checked by the
-  // caller); an empty list leaves every brick in.
-  void restrict_to(std::span<const uint32_t> bricks, uint32_t brick_count) {
-    if (bricks.empty()) return;
-    outside_part_.assign(brick_count, 1);
-    for (const uint32_t b : bricks) outside_part_[b] = 0;
-  }
-  bool in_part(uint32_t brick) const { return outside_part_.empty() || outside_part_[brick] == 0; }
 
   // Starts keeping a view of the resident bricks (with reordering).
   void track_residency(uint32_t brick_count, const std::vector<uint32_t>& resident) {
@@ -90,21 +78,16 @@ class ProxyGate {
   // Whether the bound (if one is tested) admits `ray` over [tnear, tmax] to
   // `brick`; counts a rejection in `counters`.
   bool bound_admits(uint32_t brick, const Ray& ray, float tmax, VisitCounters& counters) const {
-    if (!in_part(brick)) {
-      ++counters.outside_part;
-      return false;
-    }
     if (bound_may_hit(brick, ray, tmax)) return true;
     ++counters.skipped_by_bound;
     return false;
   }
-  // The bound alone, uncounted (trace-ahead lists only bricks in the part,
-  // and counts when the visit is taken).
+  // The same, uncounted (trace-ahead counts when the visit is taken).
   bool bound_may_hit(uint32_t brick, const Ray& ray, float tmax) const {
     return bounds_ == nullptr || bounds_->may_hit(brick, ray, ray.tnear, tmax);
   }
-  // The gate: the part, the bound, then the proxy unless none is wanted;
-  // counts a rejection by any (outside_part, skipped_by_bound, skipped).
+  // The gate: the bound, then the proxy unless none is wanted; counts a
+  // rejection by either (skipped_by_bound, skipped).
   bool admits(uint32_t brick, const Ray& ray, float tmax, VisitCounters& counters) const {
     if (!bound_admits(brick, ray, tmax, counters)) return false;
     if (needs_no_test(brick) || may_hit(brick, ray, tmax, counters)) return true;
@@ -117,7 +100,6 @@ class ProxyGate {
   double hit_rounding_;
   const BrickBounds* bounds_;            // null: only the upper hierarchy's boxes
   std::vector<uint8_t> known_resident_;  // empty: no view kept
-  std::vector<uint8_t> outside_part_;    // empty: every brick in the part
   bool deferred_ = false;
 };
 

@@ -259,6 +259,17 @@ Status run_strategy(BatchStrategy strategy, StrategyContext<kKind>& ctx) {
 
 }  // namespace
 
+std::shared_ptr<const UpperWalks> QueryEngine::walks_for_part(std::span<const uint32_t> only_bricks) const {
+  std::vector<uint8_t> in_part(store_->brick_count(), 0);
+  for (const uint32_t b : only_bricks) in_part[b] = 1;
+  std::lock_guard lock(part_walks_mutex_);
+  if (part_walks_ == nullptr || part_walks_key_ != in_part) {
+    part_walks_ = std::make_shared<const UpperWalks>(upper_walks_->restricted_to(in_part));
+    part_walks_key_ = std::move(in_part);
+  }
+  return part_walks_;
+}
+
 template <QueryKind kKind>
 Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryOptions& options,
                         QueryStats* stats_out) {
@@ -273,8 +284,10 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
                               std::to_string(brick_count) + " bricks have ids below " +
                               std::to_string(brick_count) + ")");
   }
+  const std::shared_ptr<const UpperWalks> part_walks =
+      options.only_bricks.empty() ? nullptr : walks_for_part(options.only_bricks);
+  const UpperWalks& upper_walks = part_walks != nullptr ? *part_walks : *upper_walks_;
   ProxyGate gate(proxies_.get(), cache_->builder().hit_rounding_scale(), bounds_.get());
-  gate.restrict_to(options.only_bricks, brick_count);
   if (proxies_ != nullptr && options.reorder) {
     // Nothing is ever evicted when the budget holds the scene: a brick is
     // built at most once, so its queue is tested when it is to be built
@@ -331,7 +344,7 @@ Status QueryEngine::run(std::span<const Ray> rays, Answers answers, const QueryO
   if (ahead_possible && scratch->ahead_state.size() < n) scratch->ahead_state.resize(n);
   scratch->ahead_hits.clear();
   const RayWalk<kKind> walk{batch,
-                            *upper_walks_,
+                            upper_walks,
                             options.avx_upper && cpu_has_avx(),
                             gate,
                             demand,

@@ -134,9 +134,10 @@ struct QueryOptions {
   // When not empty, the batch traces only these bricks (ids below
   // brick_count; any order, repeats allowed; INVALID_ARGUMENT naming the
   // first id out of range): each ray's answer is its nearest hit (closest
-  // hit) or its occlusion (any hit) among their triangles, and the other
-  // bricks are passed over unloaded and unbuilt (counted as
-  // bricks_outside_part). A replica that owns part of the scene answers
+  // hit) or its occlusion (any hit) among their triangles; the upper walks
+  // are restricted to the part (core/upper/upper_part.h), so the other
+  // bricks and the subtrees holding none of the part are never traversed,
+  // loaded or built. A replica that owns part of the scene answers
   // for its part; the nearest of the parts' hits under the tie rule
   // (hit_is_better) is bitwise the whole scene's answer, and a ray is
   // occluded when any part says so. The dynamic layer is traced whole.
@@ -221,6 +222,13 @@ class QueryEngine {
   BrickAccelOptions accel_options_;
   // The upper hierarchy in the forms the walks use, made once on open.
   std::unique_ptr<const UpperWalks> upper_walks_;
+  // The walks of the last part of the scene a batch traced
+  // (QueryOptions::only_bricks; a replica traces the same part batch after
+  // batch), made on the first batch that names it.
+  std::shared_ptr<const UpperWalks> walks_for_part(std::span<const uint32_t> only_bricks) const;
+  mutable std::mutex part_walks_mutex_;
+  mutable std::vector<uint8_t> part_walks_key_;  // in_part by brick id
+  mutable std::shared_ptr<const UpperWalks> part_walks_;
   // Per-batch working memory kept for the next batch, so that warm batches
   // neither allocate nor page-fault it.
   ReusePool<BatchScratch> scratch_pool_;

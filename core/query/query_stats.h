@@ -78,9 +78,6 @@ enum class StatsServer { kNo, kYes };
   /* (ray, brick) candidates the brick bound (--brick-bounds sphere|obb) turned */                  \
   /* away after the upper hierarchy's box let them in */                                             \
   X(uint64_t, bricks_skipped_by_bound, "",        "bricks_skipped_by_bound", kSum, kYes, kYes)      \
-  /* (ray, brick) candidates outside the batch's part (QueryOptions::only_bricks), */                \
-  /* left to the replicas that own them */                                                           \
-  X(uint64_t, bricks_outside_part,     "",        "bricks_outside_part",     kSum, kYes, kYes)      \
   /* the engine's resident proxies (0 without) */                                                   \
   X(uint64_t, proxy_bytes,             "",        "proxy_bytes",             kMax, kNo,  kNo)       \
   /* traced at a brick before reaching it (some never do) */                                        \

@@ -48,12 +48,11 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
   stats.dynamic_version = 93, stats.dynamic_instances = 92, stats.rays_hit_only_dynamic = 91;
   stats.seconds_dynamic = 3.75;
   stats.subtree_loads_recycled = 90;
-  stats.bricks_outside_part = 89;
   EXPECT_EQ(stats.to_json(),
             R"({"rays":1,"invalid_rays":2,"rays_hit":3,"upper_nodes_visited":4,"rays_entering_no_brick":99,)"
             R"("brick_visits":5,"brick_visits_without_hit":98,)"
             R"("rays_in_brick_set":6,"proxy_tests":8,"bricks_skipped_by_proxy":9,)"
-            R"("bricks_skipped_by_bound":97,"bricks_outside_part":89,"proxy_bytes":10,)"
+            R"("bricks_skipped_by_bound":97,"proxy_bytes":10,)"
             R"("rays_traced_ahead":7,"brick_acquisitions":11,"cache_hits":12,"cache_misses":13,)"
             R"("brick_builds":14,"brick_rebuilds":96,"brick_builds_by_structure":{"embree":0,"bvh":95,)"
             R"("kdtree":0,"bsp":0,"grid":94,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"
@@ -68,7 +67,7 @@ TEST(QueryStatsList, JsonKeepsItsKeysOrderAndShape) {
             R"({"rays":0,"invalid_rays":0,"rays_hit":0,"upper_nodes_visited":0,"rays_entering_no_brick":0,)"
             R"("brick_visits":0,"brick_visits_without_hit":0,)"
             R"("rays_in_brick_set":0,"proxy_tests":0,"bricks_skipped_by_proxy":0,)"
-            R"("bricks_skipped_by_bound":0,"bricks_outside_part":0,"proxy_bytes":0,)"
+            R"("bricks_skipped_by_bound":0,"proxy_bytes":0,)"
             R"("rays_traced_ahead":0,"brick_acquisitions":0,"cache_hits":0,"cache_misses":0,)"
             R"("brick_builds":0,"brick_rebuilds":0,"brick_builds_by_structure":{"embree":0,"bvh":0,)"
             R"("kdtree":0,"bsp":0,"grid":0,"hgrid":0,"octree":0,"quadtree":0,"reference":0},)"

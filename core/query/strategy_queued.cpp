@@ -196,7 +196,7 @@ Status QueuedRun<kKind>::trace_ahead_at_resident() {
   for (const uint32_t b : resident_now_) {
     // One a concurrent batch has evicted since is not rebuilt for this: its
     // listed rays stay listed for when it is built again.
-    if (queues_.upcoming(b).empty() || !ctx_.cache.is_resident(b) || !ctx_.gate.in_part(b)) continue;
+    if (queues_.upcoming(b).empty() || !ctx_.cache.is_resident(b)) continue;
     PinnedBrick pin;
     OUTCORE_RETURN_IF_ERROR(acquire_brick(ctx_.cache, b, queues_.upcoming(b).size(), pin, ctx_.tally));
     ahead_.trace_at(b, pin.accel(), ctx_.tally);

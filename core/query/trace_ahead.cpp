@@ -13,9 +13,6 @@ template <QueryKind kKind>
 void TraceAhead<kKind>::select(uint32_t brick, std::span<const uint32_t> busy) {
   const QueryBatch<kKind>& batch = walk_.batch;
   std::vector<uint32_t>& listed = queues_.upcoming(brick);
-  // A brick outside the batch's part, resident for other batches, answers
-  // nothing here: its rays pass it over at their turn.
-  if (!walk_.gate.in_part(brick)) listed.clear();
   for (const uint32_t ray : listed) {
     const RayProgress& p = scratch_.progress[ray];
     if (batch.finished(ray)) continue;

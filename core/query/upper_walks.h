@@ -2,6 +2,7 @@
 // 4-wide, 8-wide), made once when the engine opens, and next_window(), which
 // fills a ray's window of upcoming bricks by the fastest form available. All
 // forms give the same bricks with the same keys (upper_traversal.h).
+// restricted_to() makes the walks of a part of the bricks (upper_part.h).
 //
 // Thread-safety: immutable after construction.
 #pragma once
@@ -9,7 +10,9 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 
+#include "core/upper/upper_part.h"
 #include "core/upper/upper_traversal.h"
 #include "core/upper/upper_wide8_traversal.h"
 
@@ -28,6 +31,18 @@ struct UpperWalks {
     if (use_flat) return;
     make_wide_upper(upper, wide);
     make_wide_upper(upper, wide8);
+  }
+
+  // These walks over only the bricks marked in `in_part` (by brick id).
+  UpperWalks restricted_to(std::span<const uint8_t> in_part) const {
+    UpperWalks part = *this;
+    if (use_flat) {
+      restrict_flat_leaves(part.flat, in_part);
+    } else {
+      restrict_wide_upper(part.wide, in_part);
+      restrict_wide_upper(part.wide8, in_part);
+    }
+    return part;
   }
 
   // The bricks after `last` that the ray enters within [tmin, limit], into

@@ -12,7 +12,6 @@ void BatchTally::add(const VisitCounters& counters) {
   stats.proxy_tests += counters.proxy_tests;
   stats.bricks_skipped_by_proxy += counters.skipped;
   stats.bricks_skipped_by_bound += counters.skipped_by_bound;
-  stats.bricks_outside_part += counters.outside_part;
   stats.rays_entering_no_brick += counters.no_brick;
   proxy_ticks += counters.proxy_ticks;
 }

@@ -44,7 +44,6 @@ struct VisitCounters {
   uint64_t proxy_tests = 0;
   uint64_t skipped = 0;           // by the proxy
   uint64_t skipped_by_bound = 0;  // by the brick bound (--brick-bounds)
-  uint64_t outside_part = 0;      // outside the batch's part (only_bricks)
   uint64_t proxy_ticks = 0;
   uint64_t ahead_visits = 0;  // visits whose tracing was done ahead of time
   uint64_t visits_without_hit = 0;

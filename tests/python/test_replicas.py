@@ -84,7 +84,6 @@ def test_parts_by_brick_answer_bitwise_as_one_server_with_every_hit_field(replic
         # Every replica traced every ray; the batch's counts are its own.
         assert client.last_stats["rays"] == len(rays)
         assert client.last_stats["rays_hit"] == np.count_nonzero(np.isfinite(reference[0]["t_hit"]))
-        assert client.last_stats["bricks_outside_part"] > 0
         _same_hits(hits, reference[0])
         for name in ("primitive_uvs", "primitive_normals"):
             np.testing.assert_array_equal(hits[name].view(np.uint32), reference[0][name].view(np.uint32))

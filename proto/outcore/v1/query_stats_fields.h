@@ -43,6 +43,5 @@
   X(rays_entering_no_brick)         \
   X(brick_visits_without_hit)       \
   X(bricks_skipped_by_bound)        \
-  X(subtree_loads_recycled)        \
-  X(bricks_outside_part)
+  X(subtree_loads_recycled)
 // clang-format on

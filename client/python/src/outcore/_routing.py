@@ -211,16 +211,15 @@ def merge_nearest(merged: np.ndarray, part: np.ndarray) -> None:
 
 def combined_stats(parts: list, routing: str, merged: np.ndarray) -> dict:
     """The batch's figures from its parts' (dicts or None): sums of the work;
-    routed by brick, every replica saw every ray, so rays, invalid_rays and
-    rays_entering_no_brick are one part's and rays_hit is counted in the
-    merged answers."""
+    routed by brick, every replica saw every ray, so rays and invalid_rays
+    are one part's and rays_hit is counted in the merged answers."""
     totals: dict = {}
     for stats in parts:
         for key, value in (stats or {}).items():
             if isinstance(value, (int, float)) and not isinstance(value, bool):
                 totals[key] = totals.get(key, 0) + value
     if routing == "bricks" and parts and parts[0]:
-        for key in ("rays", "invalid_rays", "rays_entering_no_brick"):
+        for key in ("rays", "invalid_rays"):
             if key in parts[0]:
                 totals[key] = parts[0][key]
         hit = np.isfinite(merged["t_hit"]) if merged.dtype.names else merged != 0
