@@ -62,7 +62,8 @@ enum class StatsServer { kNo, kYes };
   X(uint64_t, upper_nodes_visited,     "",        "upper_nodes_visited",     kSum, kYes, kNo)       \
   /* valid rays whose segment enters no brick's box (outside the scene's box */                      \
   /* or between its bricks): answered, misses, by their first upper walk, never */                   \
-  /* queued (0 in the resident set, which has no upper walk) */                                      \
+  /* queued (0 in the resident set, which has no upper walk; with only_bricks, */                     \
+  /* no brick of the part) */                                                                        \
   X(uint64_t, rays_entering_no_brick,  "",        "rays_entering_no_brick",  kSum, kYes, kNo)       \
   /* (ray, brick) traversals */                                                                     \
   X(uint64_t, brick_visits,            "",        "brick_visits",            kSum, kYes, kYes)      \
