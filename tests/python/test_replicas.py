@@ -290,14 +290,16 @@ def test_ring_walks_and_keys():
     assert keys[4] < keys[0] < keys[2]
 
 
-def test_outcore_query_routes_over_a_replica_list(replicas, rays, reference, tmp_path):
+@pytest.mark.parametrize("routing", ["bricks", "rays"])
+def test_outcore_query_routes_over_a_replica_list(replicas, rays, reference, tmp_path, routing):
     np.save(tmp_path / "rays.npy", rays)
     out = tmp_path / "hits.npy"
     run_outcore("query", "--server", ",".join(s.address for s in replicas), "--rays", tmp_path / "rays.npy",
-                "-o", out, "--stats")
+                "-o", out, "--stats", "--routing", routing)
     hits = np.load(out)
     np.testing.assert_array_equal(hits["t_hit"].view(np.uint32), reference[0]["t_hit"].view(np.uint32))
     np.testing.assert_array_equal(hits["primitive_id"], reference[0]["primitive_ids"])
+    np.testing.assert_array_equal(hits["geometry_id"], reference[0]["geometry_ids"])
     # The C++ and Python clients place the same rays on the same replicas.
     with outcore.SceneClient([s.address for s in replicas], timeout=120, routing="rays") as client:
         _, replica_of_ray, names = client._router.plan(rays)
