@@ -354,7 +354,9 @@ Status ReplicaRouter::run_by_bricks(const Members& members, std::span<const Ray>
   for (uint32_t r = 0; r < shares.size(); ++r) {
     if (shares[r].empty()) continue;
     Part& part = parts.emplace_back(Part{r, options, {}, {}, {}});
-    part.options.only_bricks = shares[r];
+    // A replica that owns every brick (the only one up) traces the whole
+    // scene: no part, so the engine may use its every-brick strategies.
+    if (shares[r].size() != bricks_.size()) part.options.only_bricks = shares[r];
     part.options.progress = nullptr;  // one part's progress is not the batch's
   }
   // The first part answers into `out`, the others into their own, merged.

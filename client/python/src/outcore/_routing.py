@@ -402,13 +402,17 @@ class Router:
 
     def _query_by_bricks(self, rays: np.ndarray, run_part, out: np.ndarray) -> list:
         parts = self.plan_bricks()
-        futures = [(address, bricks, self._pool.submit(run_part, self.client(address), rays, tuple(bricks)))
+        # A replica that owns every brick (the only one up) traces the whole
+        # scene: no part, so the engine may use its every-brick strategies.
+        parts = {address: (() if len(bricks) == len(self._bricks) else tuple(bricks))
+                 for address, bricks in parts.items()}
+        futures = [(address, bricks, self._pool.submit(run_part, self.client(address), rays, bricks))
                    for address, bricks in sorted(parts.items())]
         stats = []
         first = True
         for address, bricks, future in futures:
             answers, part_stats = self._finish_part(
-                address, future, rays.shape[0], lambda client, bricks=bricks: run_part(client, rays, tuple(bricks)))
+                address, future, rays.shape[0], lambda client, bricks=bricks: run_part(client, rays, bricks))
             if first:
                 out[:] = answers
                 first = False
