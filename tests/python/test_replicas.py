@@ -123,6 +123,16 @@ def test_by_brick_each_brick_is_built_on_one_replica_only(city, rays):
         _stop(servers)
 
 
+def test_replicas_that_list_no_bricks_are_routed_by_ray(replicas, rays, reference):
+    # As servers from before SceneInfo.bricks answer: the client routes by ray.
+    with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
+        client._router.plan_bricks()
+        client._router._bricks = []
+        assert client._router.plan_bricks() == {}
+        _same_hits(client.cast_rays(rays), reference[0])
+        assert client.last_stats["rays"] == len(rays)
+
+
 def test_a_part_names_bricks_of_the_scene(replicas, rays):
     from outcore.client import _INTERSECT, _QueryOptions
     with outcore.SceneClient(replicas[0].address, timeout=30) as client:

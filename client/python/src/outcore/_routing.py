@@ -379,14 +379,18 @@ class Router:
             parts.setdefault(owner[int(position)], []).append(brick)
         return parts
 
-    def query(self, rays: np.ndarray, run_part, out: np.ndarray) -> list:
+    def query(self, rays: np.ndarray, run_part, out: np.ndarray) -> tuple[list, str]:
         """Answers `rays` into `out` by parts, run_part(client, part_rays,
         only_bricks) returning (answers, stats) per part; returns the parts'
-        stats. routing="bricks": every replica traces every ray in its own
-        bricks and the answers are merged (merge_nearest); "rays": each ray
-        goes to one replica, by its key."""
+        stats and how the batch was routed. routing="bricks": every replica
+        traces every ray in its own bricks and the answers are merged
+        (merge_nearest); "rays": each ray goes to one replica, by its key;
+        also when the replicas list no bricks (servers from before
+        SceneInfo.bricks)."""
         if self.routing == "bricks":
-            return self._query_by_bricks(rays, run_part, out)
+            parts = self.plan_bricks()
+            if parts:
+                return self._query_by_bricks(parts, rays, run_part, out), "bricks"
         ring, replica_of_ray, replicas = self.plan(rays)
         parts = [(replicas[r], np.flatnonzero(replica_of_ray == r)) for r in range(len(replicas))]
         parts = [(address, idx) for address, idx in parts if idx.size]
@@ -398,10 +402,9 @@ class Router:
                                                     lambda client, idx=idx: run_part(client, rays[idx], ()))
             out[idx] = answers
             stats.append(part_stats)
-        return stats
+        return stats, "rays"
 
-    def _query_by_bricks(self, rays: np.ndarray, run_part, out: np.ndarray) -> list:
-        parts = self.plan_bricks()
+    def _query_by_bricks(self, parts: dict, rays: np.ndarray, run_part, out: np.ndarray) -> list:
         # A replica that owns every brick (the only one up) traces the whole
         # scene: no part, so the engine may use its every-brick strategies.
         parts = {address: (() if len(bricks) == len(self._bricks) else tuple(bricks))

@@ -429,8 +429,8 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
             return answers, (client.last_stats, client.last_call_shared, client.last_dynamic_version)
 
         out = np.empty(rays.shape[0], dtype=query.record_dtype)
-        parts = self._router.query(np.ascontiguousarray(rays), run_part, out)
-        self.last_stats = _routing.combined_stats([stats for stats, _, _ in parts], self._router.routing, out)
+        parts, routed_by = self._router.query(np.ascontiguousarray(rays), run_part, out)
+        self.last_stats = _routing.combined_stats([stats for stats, _, _ in parts], routed_by, out)
         self._last_call_shared = any(shared for _, shared, _ in parts)
         self.last_dynamic_version = max(version for _, _, version in parts)
         self.last_replicas = len(parts)
