@@ -31,9 +31,7 @@ using Clock = std::chrono::steady_clock;
 Status SceneQueryService::settle_stream_chunk(const v1::QueryRequest& request, const BatchPosition& position,
                                               StreamSettings& stream) const {
   // A group of chunks is traced and packed as its first chunk asks, so the
-  // whole stream has the fields of its first chunk.
-  // Chunks traced together share one part of the scene, so the whole
-  // stream traces its first chunk's.
+  // whole stream has the fields and the part of the scene of its first chunk.
   if (position.chunk == 0) {
     stream.hit_fields = request.hit_fields();
     stream.only_bricks.assign(request.only_bricks().begin(), request.only_bricks().end());

@@ -218,21 +218,23 @@ uint64_t ReplicaRouter::failovers() const {
   return failovers_;
 }
 
-std::vector<uint32_t> ReplicaRouter::live(const Members& members) const {
+std::vector<uint32_t> ReplicaRouter::live(const Members& members, std::vector<std::string>& names) const {
   std::vector<uint32_t> up;
+  names.clear();
   std::lock_guard lock(mutex_);
   for (uint32_t r = 0; r < members.replicas.size(); ++r) {
-    if (!down_.contains(members.replicas[r])) up.push_back(r);
+    if (down_.contains(members.replicas[r])) continue;
+    up.push_back(r);
+    names.push_back(members.replicas[r]);
   }
   return up;
 }
 
 std::vector<std::vector<uint32_t>> ReplicaRouter::share_bricks(const Members& members) const {
-  const std::vector<uint32_t> index_of_live = live(members);
+  std::vector<std::string> names;
+  const std::vector<uint32_t> index_of_live = live(members, names);
   std::vector<std::vector<uint32_t>> parts(members.replicas.size());
   if (index_of_live.empty()) return parts;
-  std::vector<std::string> names;
-  for (const uint32_t r : index_of_live) names.push_back(members.replicas[r]);
   const ReplicaRing ring(names, kBrickVirtualNodes);  // sorted like members.replicas
   std::map<uint64_t, uint64_t> weights;
   for (const BrickPlace& brick : bricks_) weights[brick.position] = brick.triangles;
@@ -247,12 +249,11 @@ std::vector<std::vector<uint32_t>> ReplicaRouter::plan_bricks() const {
 }
 
 std::vector<uint32_t> ReplicaRouter::route(const Members& members, std::span<const Ray> rays) const {
-  const std::vector<uint32_t> index_of_live = live(members);
-  std::vector<std::string> live;
-  for (const uint32_t r : index_of_live) live.push_back(members.replicas[r]);
+  std::vector<std::string> names;
+  const std::vector<uint32_t> index_of_live = live(members, names);
   std::vector<uint32_t> replica_of_ray(rays.size(), 0);
-  if (live.empty()) return replica_of_ray;
-  const ReplicaRing ring(live);  // sorted like members.replicas, so indices map through index_of_live
+  if (index_of_live.empty()) return replica_of_ray;
+  const ReplicaRing ring(names);  // sorted like members.replicas, so indices map through index_of_live
   const std::vector<uint64_t> keys = route_keys(rays, lo_, hi_);
   std::map<uint64_t, uint64_t> counts;
   for (const uint64_t key : keys) ++counts[key];

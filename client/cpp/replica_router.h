@@ -96,8 +96,9 @@ class ReplicaRouter {
   template <class Answer>
   Status call_with_failover(const Members& members, uint32_t& replica, std::span<const Ray> rays,
                             std::span<Answer> out, const CallOptions& options, CallStats& stats);
-  // The replicas up (indices into members.replicas).
-  std::vector<uint32_t> live(const Members& members) const;
+  // The replicas up: indices into members.replicas, and into `names` their
+  // addresses (sorted, as members.replicas).
+  std::vector<uint32_t> live(const Members& members, std::vector<std::string>& names) const;
   // Each ray's replica (index into members.replicas) among those up.
   std::vector<uint32_t> route(const Members& members, std::span<const Ray> rays) const;
   // Each live replica's bricks (by index into members.replicas).

@@ -20,10 +20,7 @@
 namespace outcore {
 namespace OUTCORE_UNITY_ID {
 
-std::unique_ptr<QueryEngine> open_engine(const testing::PackedScene& scene, uint64_t cache_bytes,
-                                         const std::string& brick_accel) {
-  return testing::open_test_engine(scene, brick_accel, cache_bytes);
-}
+using testing::open_test_engine;
 
 // A pinhole camera outside the box looking at its centre: coherent rays,
 // traced as packets.
@@ -100,7 +97,7 @@ TEST(BrickParts, PartsMergedByTheTieRuleAnswerBitwiseAsTheWholeScene) {
       std::vector<Ray> rays = testing::make_test_rays(scene->bounds, 4000, 11);
       const std::vector<Ray> camera = camera_rays(scene->bounds, 48);
       rays.insert(rays.end(), camera.begin(), camera.end());
-      auto whole_engine = open_engine(*scene, uint64_t{1} << 30, structure);
+      auto whole_engine = open_test_engine(*scene, structure);
       const uint32_t bricks = whole_engine->store().brick_count();
       ASSERT_GE(bricks, 4u);
       const Answers whole = trace(*whole_engine, rays, {});
@@ -118,7 +115,7 @@ TEST(BrickParts, PartsMergedByTheTieRuleAnswerBitwiseAsTheWholeScene) {
           SCOPED_TRACE("budget " + std::to_string(budget) + (interleaved ? " interleaved" : " runs"));
           Answers merged{std::vector<Hit>(rays.size()), std::vector<uint8_t>(rays.size(), 0), {}};
           for (const std::vector<uint32_t>& part : split_bricks(bricks, 3, interleaved)) {
-            auto engine = open_engine(*scene, budget, structure);
+            auto engine = open_test_engine(*scene, structure, budget);
             QueryOptions options;
             options.only_bricks = part;
             const Answers got = trace(*engine, rays, options);
@@ -133,7 +130,7 @@ TEST(BrickParts, PartsMergedByTheTieRuleAnswerBitwiseAsTheWholeScene) {
 
       // Under a budget of a few bricks, after a whole-scene batch left bricks
       // outside the part resident: trace-ahead must not use them.
-      auto warm = open_engine(*scene, 3 * one_brick, structure);
+      auto warm = open_test_engine(*scene, structure, 3 * one_brick);
       Answers merged_warm{std::vector<Hit>(rays.size()), std::vector<uint8_t>(rays.size(), 0), {}};
       for (const std::vector<uint32_t>& part : split_bricks(bricks, 2, false)) {
         EXPECT_TRUE(bitwise_equal(trace(*warm, rays, {}).hits, whole.hits));
@@ -141,7 +138,7 @@ TEST(BrickParts, PartsMergedByTheTieRuleAnswerBitwiseAsTheWholeScene) {
         options.only_bricks = part;
         const Answers got = trace(*warm, rays, options);
         // Exactly the part's answers: no hit from a brick outside it.
-        const Answers alone = trace(*open_engine(*scene, uint64_t{1} << 30, structure), rays, options);
+        const Answers alone = trace(*open_test_engine(*scene, structure), rays, options);
         EXPECT_TRUE(bitwise_equal(got.hits, alone.hits));
         EXPECT_EQ(got.occluded, alone.occluded);
         merge_into(merged_warm, got);
@@ -174,7 +171,7 @@ TEST(BrickParts, PartsMergedByTheTieRuleAnswerBitwiseAsTheWholeScene) {
 
 TEST(BrickParts, APartOfEveryBrickAnswersAsNoPartAndAnEmptyPartIsEveryBrick) {
   const auto scene = testing::pack_test_scene({"gen:sphere?level=4"}, 400);
-  auto engine = open_engine(*scene, uint64_t{1} << 30, "bvh");
+  auto engine = open_test_engine(*scene, "bvh");
   const std::vector<Ray> rays = testing::make_test_rays(scene->bounds, 2000, 3);
   const Answers whole = trace(*engine, rays, {});
   QueryOptions every;
@@ -189,7 +186,7 @@ TEST(BrickParts, APartOfEveryBrickAnswersAsNoPartAndAnEmptyPartIsEveryBrick) {
 
 TEST(BrickParts, ABrickIdOutOfRangeOrAPartOnEveryHitQueriesIsInvalidArgument) {
   const auto scene = testing::pack_test_scene({"gen:sphere?level=3"}, 300);
-  auto engine = open_engine(*scene, uint64_t{1} << 30, "bvh");
+  auto engine = open_test_engine(*scene, "bvh");
   const uint32_t bricks = engine->store().brick_count();
   const std::vector<Ray> rays = testing::make_test_rays(scene->bounds, 100, 5);
   QueryOptions bad;

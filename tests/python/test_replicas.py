@@ -126,7 +126,7 @@ def test_by_brick_each_brick_is_built_on_one_replica_only(city, rays):
 def test_replicas_that_list_no_bricks_are_routed_by_ray(replicas, rays, reference):
     # As servers from before SceneInfo.bricks answer: the client routes by ray.
     with outcore.SceneClient([s.address for s in replicas], timeout=120) as client:
-        client._router.plan_bricks()
+        client._router._bounds = tuple(client.scene_info()[k] for k in ("bounds_lo", "bounds_hi"))
         client._router._bricks = []
         assert client._router.plan_bricks() == {}
         _same_hits(client.cast_rays(rays), reference[0])

@@ -251,16 +251,17 @@ def resolve(target: str) -> list[str]:
 class Router:
     """Routes the ray queries of a replicated SceneClient (see the module)."""
 
-    def __init__(self, targets, make_client, cells: int = 8, load_factor: float = 1.25,
-                 resolve_every: float = 30.0, retry_after: float = 30.0, routing: str = "bricks",
-                 brick_load_factor: float = BRICK_LOAD_FACTOR):
+    def __init__(self, targets, make_client, cells: int = 8, load_factor: float | None = None,
+                 resolve_every: float = 30.0, retry_after: float = 30.0, routing: str = "bricks"):
         self._targets = list(targets)
         self._make_client = make_client
         self.routing = routing
-        self.brick_load_factor = brick_load_factor
         self._bricks = None  # SceneInfo.bricks, fetched once
+        self._brick_plan = None  # (live replicas, their parts): made again when the live set changes
         self.cells = cells
-        self.load_factor = load_factor
+        # Of an even share: of the triangles (bricks), of the rays (rays).
+        self.load_factor = load_factor if load_factor is not None else (
+            BRICK_LOAD_FACTOR if routing == "bricks" else 1.25)
         self.resolve_every = resolve_every
         self.retry_after = retry_after
         self._lock = threading.Lock()
@@ -367,16 +368,22 @@ class Router:
     def plan_bricks(self) -> dict:
         """Replica -> the brick ids it owns: bricks on the ring by place
         (brick_positions), weighed by their triangles, bounded load
-        brick_load_factor (1.01: parts within 1 % of an even share, so that
-        a part fits a replica's share of the cache)."""
-        live = self._live_with_scene()
+        load_factor (1.01: parts within 1 % of an even share, so that a part
+        fits a replica's share of the cache). Made once per set of live
+        replicas (a batch reuses its predecessor's)."""
+        live = tuple(self._live_with_scene())
+        with self._lock:
+            if self._brick_plan is not None and self._brick_plan[0] == live:
+                return self._brick_plan[1]
         ring = HashRing(live, BRICK_VIRTUAL_NODES)
         positions = brick_positions(self._bricks, *self._bounds)
         weights = {int(p): max(1, int(b.get("triangle_count", 0))) for p, b in zip(positions, self._bricks)}
-        owner = ring.assign(weights, self.brick_load_factor)
+        owner = ring.assign(weights, self.load_factor)
         parts: dict = {}
         for brick, position in enumerate(positions):
             parts.setdefault(owner[int(position)], []).append(brick)
+        with self._lock:
+            self._brick_plan = (live, parts)
         return parts
 
     def query(self, rays: np.ndarray, run_part, out: np.ndarray) -> tuple[list, str]:

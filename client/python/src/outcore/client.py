@@ -167,16 +167,14 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
                 raise ValueError(f"route_cells must be an int in 1..64, got {route_cells!r}")
             if routing not in ("bricks", "rays"):
                 raise ValueError(f"routing must be 'bricks' or 'rays', got {routing!r}")
-            if load_factor is None:
-                load_factor = _routing.BRICK_LOAD_FACTOR if routing == "bricks" else 1.25
-            if isinstance(load_factor, bool) or not (load_factor >= 1 and math.isfinite(load_factor)):
-                raise ValueError(f"load_factor must be a number >= 1, got {load_factor!r}")
+            if load_factor is not None and (isinstance(load_factor, bool) or
+                                            not (load_factor >= 1 and math.isfinite(load_factor))):
+                raise ValueError(f"load_factor must be None or a number >= 1, got {load_factor!r}")
             options = dict(timeout=timeout, max_message_mb=max_message_mb, chunk_rays=chunk_rays,
                            shared_memory=shared_memory, tls_ca=tls_ca, tls_cert=tls_cert, tls_key=tls_key,
                            token=token)
             self._router = _routing.Router(targets, lambda replica: SceneClient(replica, **options),
-                                           cells=route_cells, load_factor=load_factor, routing=routing,
-                                           brick_load_factor=load_factor)
+                                           cells=route_cells, load_factor=load_factor, routing=routing)
             # Calls other than the ray queries go to one replica (the same
             # answer on any); the dynamic layer is refused (it is per server).
             address = self._router.replicas()[0]
@@ -397,7 +395,9 @@ class SceneClient(Open3dQueries, DynamicLayerCalls):
         return chunk
 
     def _query(self, query: _Query, rays: np.ndarray, opts: _QueryOptions) -> np.ndarray:
-        """Answers (n, 6|8) wire rays: an (n,) array of query.record_dtype."""
+        """Answers (n, 6|8) wire rays: an (n,) array of query.record_dtype,
+        or of whole hit records (_wire.HIT_DTYPE) from a shared-memory call
+        that asked for fewer fields."""
         if self._router is not None and rays.shape[0]:
             return self._routed_query(query, rays, opts)
         n = rays.shape[0]
