@@ -10,9 +10,11 @@
 #include "client/cli/render_remote.h"
 #include "core/cli/commands.h"
 #include "core/cli/render_command.h"
+#include "core/util/huge_page_heap.h"
 #include "server/serve_command.h"
 
 int main(int argc, char** argv) {
+  outcore::reexec_with_huge_page_heap(argv);
   // One malloc arena for the whole process. Brick builds and evictions free
   // megabytes on one thread that another allocates next; with glibc's
   // per-thread arenas that memory stayed with the arena that freed it, and

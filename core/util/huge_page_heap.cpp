@@ -1,0 +1,56 @@
+#include "core/util/huge_page_heap.h"
+
+#include <unistd.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+namespace outcore {
+namespace {
+
+// Set in the re-executed process so that it never re-executes again.
+constexpr const char* kReexecMarker = "OUTCORE_HUGE_PAGES_REEXEC";
+
+std::string read_thp_mode() {
+  std::ifstream file("/sys/kernel/mm/transparent_hugepage/enabled");
+  std::stringstream text;
+  text << file.rdbuf();
+  return text.str();
+}
+
+}  // namespace
+
+std::optional<std::string> huge_page_tunables(const char* current_tunables, std::string_view thp_enabled,
+                                              const char* opt_out, bool reexecuted) {
+  if (reexecuted) return std::nullopt;
+  if (opt_out != nullptr && std::string_view(opt_out) == "0") return std::nullopt;
+  if (thp_enabled.find("[madvise]") == std::string_view::npos) return std::nullopt;
+  const std::string_view current = current_tunables != nullptr ? current_tunables : "";
+  if (current.find("glibc.malloc.hugetlb=") != std::string_view::npos) return std::nullopt;
+  std::string tunables(current);
+  if (!tunables.empty()) tunables += ':';
+  tunables += kHugePageTunable;
+  return tunables;
+}
+
+void reexec_with_huge_page_heap(char** argv) {
+  const char* current = std::getenv("GLIBC_TUNABLES");
+  const std::optional<std::string> tunables = huge_page_tunables(
+      current, read_thp_mode(), std::getenv("OUTCORE_HUGE_PAGES"), std::getenv(kReexecMarker) != nullptr);
+  if (!tunables) return;
+  const std::optional<std::string> original =
+      current != nullptr ? std::optional<std::string>(current) : std::nullopt;
+  if (setenv("GLIBC_TUNABLES", tunables->c_str(), 1) == 0 && setenv(kReexecMarker, "1", 1) == 0) {
+    execv("/proc/self/exe", argv);
+  }
+  // Still here: exec failed (no /proc, say); run as we are, environment as it was.
+  unsetenv(kReexecMarker);
+  if (original) {
+    setenv("GLIBC_TUNABLES", original->c_str(), 1);
+  } else {
+    unsetenv("GLIBC_TUNABLES");
+  }
+}
+
+}  // namespace outcore
