@@ -315,3 +315,24 @@ def test_render_from_a_server_with_the_token_and_tls(store, pki, token_file, tmp
         assert (tmp_path / "drawn.png").read_bytes().startswith(b"\x89PNG")
     finally:
         assert server.stop() == 0, "".join(server.lines)
+
+
+def _environment(pid: int) -> list[bytes]:
+    return Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
+
+
+def test_serve_runs_on_a_huge_page_heap_unless_told_not_to(server, store, monkeypatch):
+    mode = Path("/sys/kernel/mm/transparent_hugepage/enabled")
+    if not mode.is_file() or "[madvise]" not in mode.read_text():
+        pytest.skip("the kernel's transparent huge pages are not 'madvise': outcore leaves glibc as it is")
+    # The fixture's server re-executed itself (same pid) with glibc's tunable.
+    tunables = [v for v in _environment(server.process.pid) if v.startswith(b"GLIBC_TUNABLES=")]
+    assert tunables == [b"GLIBC_TUNABLES=glibc.malloc.hugetlb=1"]
+    with outcore.SceneClient(server.address, timeout=30) as client:
+        assert client.scene_info()["triangle_count"] > 0
+    monkeypatch.setenv("OUTCORE_HUGE_PAGES", "0")
+    plain = Server(store)
+    try:
+        assert not any(v.startswith(b"GLIBC_TUNABLES=") for v in _environment(plain.process.pid))
+    finally:
+        assert plain.stop() == 0
