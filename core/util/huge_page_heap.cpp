@@ -22,9 +22,9 @@ std::string read_thp_mode() {
 }  // namespace
 
 std::optional<std::string> huge_page_tunables(const char* current_tunables, std::string_view thp_enabled,
-                                              const char* opt_out, bool reexecuted) {
+                                              const char* request, bool reexecuted) {
   if (reexecuted) return std::nullopt;
-  if (opt_out != nullptr && std::string_view(opt_out) == "0") return std::nullopt;
+  if (request == nullptr || std::string_view(request) != "1") return std::nullopt;
   if (thp_enabled.find("[madvise]") == std::string_view::npos) return std::nullopt;
   const std::string_view current = current_tunables != nullptr ? current_tunables : "";
   if (current.find("glibc.malloc.hugetlb=") != std::string_view::npos) return std::nullopt;

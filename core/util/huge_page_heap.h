@@ -1,13 +1,15 @@
-// Transparent huge pages for the process's heap. Brick trees are read in
-// random order across hundreds of megabytes; with 4 KiB pages nearly every
-// brick visit misses the TLB. Where the kernel gives huge pages only to
+// Transparent huge pages for the process's heap, on request. Brick trees
+// are read in random order across hundreds of megabytes; with 4 KiB pages
+// many brick visits miss the TLB. Where the kernel gives huge pages only to
 // memory that asks for them (THP "madvise", Debian's default), glibc asks for
 // its heap when started with GLIBC_TUNABLES=glibc.malloc.hugetlb=1, and it
-// reads tunables only at start, so the `outcore` command re-executes itself
-// once with that tunable added (measured: docs/BENCHMARKS.md, issue 23).
-// OUTCORE_HUGE_PAGES=0 turns it off; a GLIBC_TUNABLES that already names the
-// tunable is left as the user set it. Embree, the peers' engine, advises its
-// own arenas the same way.
+// reads tunables only at start, so with OUTCORE_HUGE_PAGES=1 the `outcore`
+// command re-executes itself once with that tunable added. Off by default:
+// warm batches of the large scenes take 0.88-0.96x the time, but every
+// brick build then faults in and zeroes 2 MiB pages, and cold batches took
+// ~1.2x the time (docs/BENCHMARKS.md, issue 23), which an out-of-core run
+// pays on every rebuild. A GLIBC_TUNABLES that already names the tunable is
+// left as the user set it.
 //
 // Thread-safety: call reexec_with_huge_page_heap() first thing in main,
 // before any thread exists; the decision function is pure.
@@ -22,13 +24,14 @@ namespace outcore {
 inline constexpr std::string_view kHugePageTunable = "glibc.malloc.hugetlb=1";
 
 // The GLIBC_TUNABLES value to re-execute with, or nothing when the process
-// should run as it is: opted out (opt_out "0"), already re-executed
-// (reexecuted), the tunable already set (in any value), or a kernel whose
-// THP mode (the content of /sys/kernel/mm/transparent_hugepage/enabled, the
-// bracketed word chosen) is not "madvise" ("always" gives huge pages
-// anyway, "never" or an unknown file none).
+// should run as it is: not asked for (request other than "1"), already
+// re-executed (reexecuted), the tunable already set (in any value), or a
+// kernel whose THP mode (the content of
+// /sys/kernel/mm/transparent_hugepage/enabled, the bracketed word chosen) is
+// not "madvise" ("always" gives huge pages anyway, "never" or an unknown
+// file none).
 std::optional<std::string> huge_page_tunables(const char* current_tunables, std::string_view thp_enabled,
-                                              const char* opt_out, bool reexecuted);
+                                              const char* request, bool reexecuted);
 
 // Re-executes /proc/self/exe with argv and the tunable added when
 // huge_page_tunables says so; returns (and the process goes on as it is)

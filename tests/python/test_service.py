@@ -9,6 +9,7 @@ security flags (the C++ client).
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import subprocess
@@ -321,18 +322,21 @@ def _environment(pid: int) -> list[bytes]:
     return Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
 
 
-def test_serve_runs_on_a_huge_page_heap_unless_told_not_to(server, store, monkeypatch):
+def test_serve_runs_on_a_huge_page_heap_when_asked(server, store, monkeypatch):
+    # By default the process keeps glibc's tunables as they were given (the fixture's server).
+    given = os.environ.get("GLIBC_TUNABLES")
+    expected = [] if given is None else [b"GLIBC_TUNABLES=" + given.encode()]
+    assert [v for v in _environment(server.process.pid) if v.startswith(b"GLIBC_TUNABLES=")] == expected
     mode = Path("/sys/kernel/mm/transparent_hugepage/enabled")
     if not mode.is_file() or "[madvise]" not in mode.read_text():
         pytest.skip("the kernel's transparent huge pages are not 'madvise': outcore leaves glibc as it is")
-    # The fixture's server re-executed itself (same pid) with glibc's tunable.
-    tunables = [v for v in _environment(server.process.pid) if v.startswith(b"GLIBC_TUNABLES=")]
-    assert tunables == [b"GLIBC_TUNABLES=glibc.malloc.hugetlb=1"]
-    with outcore.SceneClient(server.address, timeout=30) as client:
-        assert client.scene_info()["triangle_count"] > 0
-    monkeypatch.setenv("OUTCORE_HUGE_PAGES", "0")
-    plain = Server(store)
+    monkeypatch.setenv("OUTCORE_HUGE_PAGES", "1")
+    huge = Server(store)
     try:
-        assert not any(v.startswith(b"GLIBC_TUNABLES=") for v in _environment(plain.process.pid))
+        # Re-executed (same pid) with glibc's tunable, and serving.
+        tunables = [v for v in _environment(huge.process.pid) if v.startswith(b"GLIBC_TUNABLES=")]
+        assert tunables == [b"GLIBC_TUNABLES=glibc.malloc.hugetlb=1"]
+        with outcore.SceneClient(huge.address, timeout=30) as client:
+            assert client.scene_info()["triangle_count"] > 0
     finally:
-        assert plain.stop() == 0
+        assert huge.stop() == 0
