@@ -103,7 +103,6 @@ class SteppedWalk {
       prefetch_lines(&tree.nodes[index_], sizeof(WideBvhNode));
       return;
     }
-    const uint32_t base = top_;
     for (uint32_t bits = mask; bits != 0; bits &= bits - 1) {
       const auto k = static_cast<uint32_t>(__builtin_ctz(bits));
       const Item item{node.child[k], node.leaf_triangles[k], entry[k]};
@@ -112,10 +111,9 @@ class SteppedWalk {
       } else {
         prefetch_lines(&tree.packets[item.ref / kPacketLanes], sizeof(TrianglePacket));
       }
-      uint32_t j = top_++;
-      for (; j > base && stack_[j - 1].entry < item.entry; --j) stack_[j] = stack_[j - 1];
-      stack_[j] = item;
+      stack_[top_ + push_position<V>(entry, mask, k)] = item;
     }
+    top_ += static_cast<uint32_t>(__builtin_popcount(mask));
   }
 
   bool begin(const Ray& ray, float tmax) {

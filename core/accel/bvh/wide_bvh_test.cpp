@@ -22,6 +22,7 @@
 #include "core/accel/bvh/mt_triangle_test.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
 #include "core/accel/bvh/wide_bvh_collapse.h"
+#include "core/accel/bvh/wide_bvh_kernels.h"
 #include "core/accel/bvh/wide_bvh_top_level.h"
 #include "core/accel/bvh/wide_bvh_trace.h"
 
@@ -484,6 +485,27 @@ TEST(WideBvh, SimdPathComesFromTheEnvironment) {
   chosen = simd_path_from_environment();
   ASSERT_TRUE(chosen.ok());
   EXPECT_EQ(*chosen, simd_path_supported(SimdPath::kAvx2) ? SimdPath::kAvx2 : SimdPath::kSse4);
+}
+
+// The walks push a node's entered children at push_position: the order must
+// be the stable sort of the entries, farthest at the bottom, ties by index.
+TEST(WideBvh, PushPositionsOrderChildrenFarthestFirstTiesByIndex) {
+  std::mt19937 rng(7);
+  std::uniform_int_distribution<int> value(0, 4);  // few values: many ties
+  for (int trial = 0; trial < 2000; ++trial) {
+    alignas(32) float entry[kWideBvhWidth];
+    for (float& e : entry) e = trial % 3 == 0 ? -static_cast<float>(value(rng)) : 0.5f * value(rng);
+    const uint32_t mask = static_cast<uint32_t>(rng()) & 0xffu;
+    std::vector<uint32_t> reference;
+    for (uint32_t k = 0; k < kWideBvhWidth; ++k)
+      if (mask >> k & 1u) reference.push_back(k);
+    std::stable_sort(reference.begin(), reference.end(),
+                     [&](uint32_t a, uint32_t b) { return entry[a] > entry[b]; });
+    for (uint32_t position = 0; position < reference.size(); ++position) {
+      EXPECT_EQ(wide_kernels::push_position<SimdLanes4>(entry, mask, reference[position]), position)
+          << "trial " << trial << ", child " << reference[position];
+    }
+  }
 }
 
 }  // namespace OUTCORE_UNITY_ID
