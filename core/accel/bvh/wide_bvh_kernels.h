@@ -74,9 +74,13 @@ struct BoxLanes {
 // folded entry and exit: scaling outward, x -> min(x * down, x * up), is
 // monotonic, so widening the largest near distance (or tmin) is widening each
 // and taking the largest, only looser at tmin itself.
+//
+// Always inlined: GCC kept it a call in the stepped walk, and inlined the
+// bunny's incoherent rays take 0.93-0.96x the time, the city's 0.96x
+// (docs/BENCHMARKS.md, issue 23).
 template <class V>
-inline uint32_t node_box_mask(const WideBvhNode& node, const BoxLanes<V>& ray, float tmin, float tmax,
-                              float* entry) {
+__attribute__((always_inline)) inline uint32_t node_box_mask(const WideBvhNode& node, const BoxLanes<V>& ray,
+                                                             float tmin, float tmax, float* entry) {
   const float* rows = &node.lo[0][0];  // lo[3][8] then hi[3][8]
   uint32_t mask = 0;
   for (uint32_t group = 0; group < kWideBvhWidth; group += V::kWidth) {
