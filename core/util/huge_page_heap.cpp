@@ -21,11 +21,10 @@ std::string read_thp_mode() {
 
 }  // namespace
 
-std::optional<std::string> huge_page_tunables(const char* current_tunables, std::string_view thp_enabled,
-                                              const char* request, bool reexecuted) {
+std::optional<std::string> huge_page_tunables(const char* current_tunables, const char* request,
+                                              bool reexecuted) {
   if (reexecuted) return std::nullopt;
   if (request == nullptr || std::string_view(request) != "1") return std::nullopt;
-  if (thp_enabled.find("[madvise]") == std::string_view::npos) return std::nullopt;
   const std::string_view current = current_tunables != nullptr ? current_tunables : "";
   if (current.find("glibc.malloc.hugetlb=") != std::string_view::npos) return std::nullopt;
   std::string tunables(current);
@@ -34,11 +33,15 @@ std::optional<std::string> huge_page_tunables(const char* current_tunables, std:
   return tunables;
 }
 
+bool huge_pages_on_request(std::string_view thp_enabled) {
+  return thp_enabled.find("[madvise]") != std::string_view::npos;
+}
+
 void reexec_with_huge_page_heap(char** argv) {
   const char* current = std::getenv("GLIBC_TUNABLES");
-  const std::optional<std::string> tunables = huge_page_tunables(
-      current, read_thp_mode(), std::getenv("OUTCORE_HUGE_PAGES"), std::getenv(kReexecMarker) != nullptr);
-  if (!tunables) return;
+  const std::optional<std::string> tunables =
+      huge_page_tunables(current, std::getenv("OUTCORE_HUGE_PAGES"), std::getenv(kReexecMarker) != nullptr);
+  if (!tunables || !huge_pages_on_request(read_thp_mode())) return;
   const std::optional<std::string> original =
       current != nullptr ? std::optional<std::string>(current) : std::nullopt;
   if (setenv("GLIBC_TUNABLES", tunables->c_str(), 1) == 0 && setenv(kReexecMarker, "1", 1) == 0) {

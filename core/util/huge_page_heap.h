@@ -12,7 +12,7 @@
 // left as the user set it.
 //
 // Thread-safety: call reexec_with_huge_page_heap() first thing in main,
-// before any thread exists; the decision function is pure.
+// before any thread exists; the decision functions are pure.
 #pragma once
 
 #include <optional>
@@ -25,17 +25,20 @@ inline constexpr std::string_view kHugePageTunable = "glibc.malloc.hugetlb=1";
 
 // The GLIBC_TUNABLES value to re-execute with, or nothing when the process
 // should run as it is: not asked for (request other than "1"), already
-// re-executed (reexecuted), the tunable already set (in any value), or a
-// kernel whose THP mode (the content of
-// /sys/kernel/mm/transparent_hugepage/enabled, the bracketed word chosen) is
-// not "madvise" ("always" gives huge pages anyway, "never" or an unknown
-// file none).
-std::optional<std::string> huge_page_tunables(const char* current_tunables, std::string_view thp_enabled,
-                                              const char* request, bool reexecuted);
+// re-executed (reexecuted), or the tunable already set (in any value).
+std::optional<std::string> huge_page_tunables(const char* current_tunables, const char* request,
+                                              bool reexecuted);
+
+// Whether the kernel's THP mode (the content of
+// /sys/kernel/mm/transparent_hugepage/enabled, the bracketed word chosen)
+// gives huge pages to memory that asks: "madvise" only ("always" gives them
+// anyway, "never" or an unknown file none).
+bool huge_pages_on_request(std::string_view thp_enabled);
 
 // Re-executes /proc/self/exe with argv and the tunable added when
-// huge_page_tunables says so; returns (and the process goes on as it is)
-// when it says not, or when the re-execution fails.
+// huge_page_tunables says so and the kernel gives huge pages on request (the
+// mode file is read only then); returns (and the process goes on as it is)
+// otherwise, or when the re-execution fails.
 void reexec_with_huge_page_heap(char** argv);
 
 }  // namespace outcore
