@@ -24,8 +24,10 @@ void keep_usable_triangles(BrickData& brick) {
   for (uint64_t k = 0; k < brick.triangles.size(); ++k) {
     const Triangle& tri = brick.triangles[k];
     if (!tri.is_finite() || tri.is_degenerate()) continue;
-    brick.triangles[kept] = tri;
-    brick.ids[kept] = brick.ids[k];
+    if (kept != k) {
+      brick.triangles[kept] = tri;
+      brick.ids[kept] = brick.ids[k];
+    }
     ++kept;
   }
   brick.triangles.resize(kept);

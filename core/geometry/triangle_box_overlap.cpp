@@ -51,53 +51,66 @@ bool triangle_may_touch_box(const Triangle& triangle, const Vec3d& lo, const Vec
   return true;
 }
 
+namespace overlap_detail {
+
+ProjectedAxis::ProjectedAxis(const Vec3d& axis_, const Vec3d& a, const Vec3d& b, const Vec3d& c)
+    : axis(axis_) {
+  const double pa = dot(axis, a), pb = dot(axis, b), pc = dot(axis, c);
+  min = std::min({pa, pb, pc});
+  max = std::max({pa, pb, pc});
+  magnitude = std::max({std::abs(pa), std::abs(pb), std::abs(pc)});
+}
+
+bool ProjectedAxis::separates(const GrownBox& box) const {
+  const double at_center = dot(axis, box.center);
+  const double radius = box.h.x * std::abs(axis.x) + box.h.y * std::abs(axis.y) + box.h.z * std::abs(axis.z);
+  // Projections taken from the origin: the slack scales with every
+  // magnitude involved, the centre's and the vertices' included.
+  const double slack = (radius + magnitude + std::abs(at_center)) * kRelativeSlack;
+  return min - at_center > radius + slack || max - at_center < -radius - slack;
+}
+
+}  // namespace overlap_detail
+
+using overlap_detail::GrownBox;
+using overlap_detail::ProjectedAxis;
+
 TriangleBoxOverlap::TriangleBoxOverlap(const Triangle& triangle) {
   const Vec3d a(triangle.v0), b(triangle.v1), c(triangle.v2);
   const Vec3d edges[3] = {b - a, c - b, a - c};
   const Vec3d unit[3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
-  axes_[0] = cross(edges[0], edges[1]);
+  axes_[0] = ProjectedAxis(cross(edges[0], edges[1]), a, b, c);
   int k = 1;
   for (const Vec3d& edge : edges) {
-    for (const Vec3d& axis : unit) axes_[k++] = cross(edge, axis);
-  }
-  for (k = 0; k < kAxes; ++k) {
-    const double pa = dot(axes_[k], a), pb = dot(axes_[k], b), pc = dot(axes_[k], c);
-    min_[k] = std::min({pa, pb, pc});
-    max_[k] = std::max({pa, pb, pc});
-    magnitude_[k] = std::max({std::abs(pa), std::abs(pb), std::abs(pc)});
+    for (const Vec3d& axis : unit) axes_[k++] = ProjectedAxis(cross(edge, axis), a, b, c);
   }
 }
 
 bool TriangleBoxOverlap::may_touch_overlapping_box(const Vec3d& lo, const Vec3d& hi, double margin) const {
-  const Box box(lo, hi, margin);
-  for (int k = 0; k < kAxes; ++k) {
-    if (separates(k, box)) return false;
+  const GrownBox box(lo, hi, margin);
+  for (const ProjectedAxis& axis : axes_) {
+    if (axis.separates(box)) return false;
   }
   return true;
 }
 
 bool TriangleBoxOverlap::plane_may_touch_box(const Vec3d& lo, const Vec3d& hi, double margin) const {
-  return !separates(0, Box(lo, hi, margin));
+  return !axes_[0].separates(GrownBox(lo, hi, margin));
 }
 
 bool TriangleBoxOverlap::may_touch_overlapping_column(const Vec3d& lo, const Vec3d& hi, double margin,
                                                       int axis) const {
-  const Box box(lo, hi, margin);
+  const GrownBox box(lo, hi, margin);
   // The products of each edge with the column's axis: axes_[1 + 3 e + axis].
   for (int edge = 0; edge < 3; ++edge) {
-    if (separates(1 + 3 * edge + axis, box)) return false;
+    if (axes_[1 + 3 * edge + axis].separates(box)) return false;
   }
   return true;
 }
 
-bool TriangleBoxOverlap::separates(int k, const Box& box) const {
-  const Vec3d& axis = axes_[k];
-  const double at_center = dot(axis, box.center);
-  const double radius = box.h.x * std::abs(axis.x) + box.h.y * std::abs(axis.y) + box.h.z * std::abs(axis.z);
-  // Projections taken from the origin: the slack scales with every
-  // magnitude involved, the centre's and the vertices' included.
-  const double slack = (radius + magnitude_[k] + std::abs(at_center)) * kRelativeSlack;
-  return min_[k] - at_center > radius + slack || max_[k] - at_center < -radius - slack;
+TrianglePlaneOverlap::TrianglePlaneOverlap(const Triangle& triangle) {
+  const Vec3d a(triangle.v0), b(triangle.v1), c(triangle.v2);
+  normal_ = ProjectedAxis(cross(b - a, c - b), a, b, c);
 }
 
 }  // namespace outcore

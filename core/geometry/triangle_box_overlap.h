@@ -27,6 +27,28 @@ bool triangle_may_touch_box(const Triangle& triangle, const Vec3d& lo, const Vec
 // the box cannot be separated from it along them. Conservative as
 // triangle_may_touch_box (the slack covers the rounding of projections
 // taken from the origin rather than the box's centre).
+namespace overlap_detail {
+
+// A box [lo, hi] grown by margin, as its centre and half extent.
+struct GrownBox {
+  GrownBox(const Vec3d& lo, const Vec3d& hi, double margin)
+      : center((lo + hi) * 0.5), h((hi - lo) * 0.5 + Vec3d(margin, margin, margin)) {}
+  Vec3d center, h;
+};
+
+// One candidate separating axis and the triangle's extent along it.
+struct ProjectedAxis {
+  ProjectedAxis() = default;
+  ProjectedAxis(const Vec3d& axis, const Vec3d& a, const Vec3d& b, const Vec3d& c);
+  // Whether the axis separates the triangle from the box beyond rounding.
+  bool separates(const GrownBox& box) const;
+
+  Vec3d axis;
+  double min = 0, max = 0, magnitude = 0;
+};
+
+}  // namespace overlap_detail
+
 class TriangleBoxOverlap {
  public:
   explicit TriangleBoxOverlap(const Triangle& triangle);
@@ -34,7 +56,7 @@ class TriangleBoxOverlap {
   bool may_touch_overlapping_box(const Vec3d& lo, const Vec3d& hi, double margin) const;
   // Whether the triangle's plane may touch the box: the first of the ten
   // axes only, a superset of may_touch_overlapping_box() at a tenth of the
-  // cost (the grids file by it: docs/BENCHMARKS.md, "Grids").
+  // cost (TrianglePlaneOverlap, which the grids file by, computes only it).
   bool plane_may_touch_box(const Vec3d& lo, const Vec3d& hi, double margin) const;
   // Whether the triangle may touch the column [lo, hi] unbounded along
   // `axis` (the quadtree's cells): exact for a column, whose only
@@ -44,16 +66,22 @@ class TriangleBoxOverlap {
   bool may_touch_overlapping_column(const Vec3d& lo, const Vec3d& hi, double margin, int axis) const;
 
  private:
-  struct Box {
-    Box(const Vec3d& lo, const Vec3d& hi, double margin)
-        : center((lo + hi) * 0.5), h((hi - lo) * 0.5 + Vec3d(margin, margin, margin)) {}
-    Vec3d center, h;
-  };
-  bool separates(int k, const Box& box) const;
-
   static constexpr int kAxes = 10;
-  Vec3d axes_[kAxes];  // the normal, then edge e x unit axis a at 1 + 3 e + a
-  double min_[kAxes], max_[kAxes], magnitude_[kAxes];
+  overlap_detail::ProjectedAxis axes_[kAxes];  // the normal, then edge e x unit axis a at 1 + 3 e + a
+};
+
+// TriangleBoxOverlap::plane_may_touch_box alone, the same answers: only the
+// normal is computed (the grids file by it, docs/BENCHMARKS.md, "Grids";
+// the nine edge axes were a tenth of a grid's build).
+class TrianglePlaneOverlap {
+ public:
+  explicit TrianglePlaneOverlap(const Triangle& triangle);
+  bool plane_may_touch_box(const Vec3d& lo, const Vec3d& hi, double margin) const {
+    return !normal_.separates(overlap_detail::GrownBox(lo, hi, margin));
+  }
+
+ private:
+  overlap_detail::ProjectedAxis normal_;
 };
 
 // The margin a structure grows its cells by when it files triangles into

@@ -2,7 +2,8 @@
 // point of the triangle lies in (sampled densely, and boxes whose face or
 // corner passes exactly through a vertex), at the origin and at offsets up
 // to 1e6, with the margin the structures grow their cells by; false for boxes inside the bounds but off the
-// triangle; the per-triangle form agrees with the one-shot test on boxes overlapping the bounds.
+// triangle; the per-triangle form agrees with the one-shot test on boxes overlapping the bounds, and
+// TrianglePlaneOverlap with its plane test.
 #include "core/geometry/triangle_box_overlap.h"
 
 #include <gtest/gtest.h>
@@ -108,6 +109,7 @@ TEST(TriangleBoxOverlap, ThePerTriangleFormAgreesWithTheOneShotTest) {
   for (int t = 0; t < 500; ++t) {
     const Triangle tri = random_triangle(rng, 0.0);
     const TriangleBoxOverlap overlap(tri);
+    const TrianglePlaneOverlap plane_only(tri);
     const Aabb b = tri.bounds();
     for (int s = 0; s < 50; ++s) {
       Vec3d lo, hi;
@@ -122,6 +124,7 @@ TEST(TriangleBoxOverlap, ThePerTriangleFormAgreesWithTheOneShotTest) {
       disagreements += one_shot != overlap.may_touch_overlapping_box(lo, hi, 1e-9);
       // The plane test is looser, never stricter.
       const bool plane = overlap.plane_may_touch_box(lo, hi, 1e-9);
+      disagreements += plane != plane_only.plane_may_touch_box(lo, hi, 1e-9);
       plane_stricter += one_shot && !plane;
       plane_looser += plane && !one_shot;
       plane_rejected += !plane;

@@ -17,18 +17,11 @@ uint32_t guess_cell(const GridLattice& grid, int axis, float x) {
 }  // namespace
 
 uint32_t GridLattice::lowest_cell_holding(int axis, float x) const {
-  uint32_t cell = guess_cell(*this, axis, x);
-  // Cell j holds x when boundary(j) <= x <= boundary(j + 1).
-  while (cell > 0 && boundary(axis, cell) >= x) --cell;
-  while (cell + 1 < resolution[axis] && boundary(axis, cell + 1) < x) ++cell;
-  return cell;
+  return lowest_cell_holding_from(axis, x, guess_cell(*this, axis, x));
 }
 
 uint32_t GridLattice::highest_cell_holding(int axis, float x) const {
-  uint32_t cell = guess_cell(*this, axis, x);
-  while (cell + 1 < resolution[axis] && boundary(axis, cell + 1) <= x) ++cell;
-  while (cell > 0 && boundary(axis, cell) > x) --cell;
-  return cell;
+  return highest_cell_holding_from(axis, x, guess_cell(*this, axis, x));
 }
 
 Status GridLattice::validate(const std::string& what, uint32_t max_resolution, uint64_t max_cells) const {

@@ -62,6 +62,19 @@ struct GridLattice {
   // (x inside the bounds; outside, the nearest end cell).
   uint32_t lowest_cell_holding(int axis, float x) const;
   uint32_t highest_cell_holding(int axis, float x) const;
+  // The same from a first guess `cell` (any cell; a near one takes fewer
+  // exact comparisons): for callers that guess faster (grid_filing.cpp).
+  uint32_t lowest_cell_holding_from(int axis, float x, uint32_t cell) const {
+    // Cell j holds x when boundary(j) <= x <= boundary(j + 1).
+    while (cell > 0 && boundary(axis, cell) >= x) --cell;
+    while (cell + 1 < resolution[axis] && boundary(axis, cell + 1) < x) ++cell;
+    return cell;
+  }
+  uint32_t highest_cell_holding_from(int axis, float x, uint32_t cell) const {
+    while (cell + 1 < resolution[axis] && boundary(axis, cell + 1) <= x) ++cell;
+    while (cell > 0 && boundary(axis, cell) > x) --cell;
+    return cell;
+  }
 
   // Resolution within [1, max_resolution] per axis and cell_count() within
   // max_cells; bounds and widths finite and ordered. `what` prefixes errors.

@@ -281,6 +281,36 @@ TEST(UniformGrid, DISABLED_MeasureMailboxing) {
   }
 }
 
+TEST(GridLattice, CellsHoldingACoordinateDoNotDependOnTheGuess) {
+  // The filing guesses by a product, the lattice by a quotient: any guess
+  // must settle on the same cells, boundaries and bounds included.
+  const GridLattice lattice =
+      GridLattice::over({{-3.1f, 0.0f, 1e6f}, {7.7f, 1e-3f, 1e6f + 64.0f}}, {37, 5, 11});
+  std::mt19937 rng(21);
+  for (int axis = 0; axis < 3; ++axis) {
+    std::vector<float> xs = {lattice.bounds.lo[axis], lattice.bounds.hi[axis]};
+    for (uint32_t j = 1; j < lattice.resolution[axis]; ++j) {
+      const float b = lattice.boundary(axis, j);
+      xs.insert(xs.end(), {b, std::nextafter(b, -INFINITY), std::nextafter(b, INFINITY)});
+    }
+    std::uniform_real_distribution<float> inside(lattice.bounds.lo[axis], lattice.bounds.hi[axis]);
+    for (int k = 0; k < 50; ++k) xs.push_back(inside(rng));
+    for (const float x : xs) {
+      const uint32_t lowest = lattice.lowest_cell_holding(axis, x);
+      const uint32_t highest = lattice.highest_cell_holding(axis, x);
+      EXPECT_LE(lowest, highest);
+      EXPECT_LE(lattice.cell_lo(axis, lowest), x);
+      EXPECT_GE(lattice.cell_hi(axis, highest), x);
+      for (uint32_t guess = 0; guess < lattice.resolution[axis]; ++guess) {
+        ASSERT_EQ(lattice.lowest_cell_holding_from(axis, x, guess), lowest)
+            << axis << " " << x << " " << guess;
+        ASSERT_EQ(lattice.highest_cell_holding_from(axis, x, guess), highest)
+            << axis << " " << x << " " << guess;
+      }
+    }
+  }
+}
+
 TEST(UniformGrid, ResolutionFollowsTheRuleAndTheBudgets) {
   Aabb cube;
   cube.extend(Vec3f(0, 0, 0));
