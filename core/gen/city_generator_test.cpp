@@ -140,7 +140,7 @@ TEST(CityGenerator, NestedCity) {
 }
 
 TEST(CityGenerator, BaseFromAFile) {
-  const std::string path = testing::TempDir() + "/outcore_city_base_quad.obj";
+  const std::string path = ::testing::TempDir() + "/outcore_city_base_quad.obj";
   {
     std::ofstream obj(path);
     obj << "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";  // one quad: two triangles

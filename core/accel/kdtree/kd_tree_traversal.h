@@ -30,9 +30,11 @@
 #include <cstdint>
 #include <limits>
 #include <span>
+#include <type_traits>
 
 #include "core/accel/bvh/bvh_traversal.h"
 #include "core/accel/kdtree/kd_tree.h"
+#include "core/accel/kdtree/watertight_ref_lanes.h"
 #include "core/accel/triangle_mailbox.h"
 #include "core/ray/query_types.h"
 #include "core/ray/ray_types.h"
@@ -191,6 +193,30 @@ inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& 
   walk<kMaxKdDepth>(tree.nodes.data(), planes, segment_min, segment_max, limit, leaf, observer);
 }
 
+// Tests triangles[refs[k]] for k < count that the mailbox admits over
+// (tnear, tfar] with Test, calling on_hit(triangle, hit) for each hit; on_hit
+// may lower tfar and returns true to stop (then so does test_refs). The
+// watertight test takes four references at a time (watertight_ref_lanes.h),
+// the others one.
+template <class Test, class Mailbox, class OnHit>
+inline bool test_refs(const typename Test::Prepared& prepared, const uint32_t* refs, uint32_t count,
+                      const Triangle* triangles, Mailbox& mailbox, float tnear, const float& tfar,
+                      OnHit&& on_hit) {
+#if defined(__x86_64__) || defined(__i386__)
+  if constexpr (std::is_same_v<Test, WatertightTriangleTest>) {
+    if (count > 1)
+      return WatertightRefLanes(prepared).test(refs, count, triangles, mailbox, tnear, tfar, on_hit);
+  }
+#endif
+  for (uint32_t k = 0; k < count; ++k) {
+    const uint32_t tri = refs[k];
+    if (!mailbox.first_visit(tri)) continue;
+    TriangleHit h;
+    if (Test::hit(prepared, triangles[tri], tnear, tfar, h) && on_hit(tri, h)) return true;
+  }
+  return false;
+}
+
 // Closest and any hit over the leaves (cells) a structure's traversal
 // visits, shared by the kd-tree, the BSP tree and the grid:
 // walk(tmin, limit, leaf) runs the structure's traverse(); the leaves'
@@ -204,20 +230,19 @@ bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk, Mailb
   uint32_t found = kInvalidId;
   TriangleHit found_hit{};
   walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
-    for (uint32_t k = first; k < first + count; ++k) {
-      const uint32_t tri = tree.refs[k];
-      if (!mailbox.first_visit(tri)) continue;
-      TriangleHit h;
-      if (!Test::hit(prepared, tree.triangles[tri], ray.tnear, best_t, h)) continue;
+    const auto on_hit = [&](uint32_t tri, const TriangleHit& h) {
       const BvhHitRecord& record = tree.records[tri];
-      if (!hit_is_better(h.t, record.geometry_id, record.primitive_id, best)) continue;
+      if (!hit_is_better(h.t, record.geometry_id, record.primitive_id, best)) return false;
       best.t = h.t;
       best.geometry_id = record.geometry_id;
       best.primitive_id = record.primitive_id;
       found = tri;
       found_hit = h;
       best_t = h.t;  // inclusive: a tie may still win on its id
-    }
+      return false;
+    };
+    test_refs<Test>(prepared, &tree.refs[first], count, tree.triangles.data(), mailbox, ray.tnear, best_t,
+                    on_hit);
     return false;
   });
   if (found == kInvalidId) return false;
@@ -234,17 +259,10 @@ bool any_hit(const View& tree, const Ray& ray, Walk&& walk, Mailbox&& mailbox = 
   const typename Test::Prepared prepared = Test::prepare(ray);
   bool hit = false;
   walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
-    for (uint32_t k = first; k < first + count; ++k) {
-      const uint32_t tri = tree.refs[k];
-      if (!mailbox.first_visit(tri)) continue;
-      TriangleHit h;
-      if (Test::hit(prepared, tree.triangles[tri], ray.tnear, best_t, h)) {
-        hit = true;
-        best_t = -std::numeric_limits<float>::infinity();  // ends the walk
-        return true;
-      }
-    }
-    return false;
+    hit = test_refs<Test>(prepared, &tree.refs[first], count, tree.triangles.data(), mailbox, ray.tnear,
+                          best_t, [](uint32_t, const TriangleHit&) { return true; });
+    if (hit) best_t = -std::numeric_limits<float>::infinity();  // ends the walk
+    return hit;
   });
   return hit;
 }
