@@ -333,9 +333,14 @@ def test_serve_runs_on_a_huge_page_heap_when_asked(server, store, monkeypatch):
     monkeypatch.setenv("OUTCORE_HUGE_PAGES", "1")
     huge = Server(store)
     try:
-        # Re-executed (same pid) with glibc's tunable, and serving.
+        # Re-executed (same pid) with glibc's tunable added to the given ones
+        # (a given hugetlb setting is the user's and stays), and serving.
+        if given is not None and "glibc.malloc.hugetlb=" in given:
+            wanted = given
+        else:
+            wanted = (given + ":" if given else "") + "glibc.malloc.hugetlb=1"
         tunables = [v for v in _environment(huge.process.pid) if v.startswith(b"GLIBC_TUNABLES=")]
-        assert tunables == [b"GLIBC_TUNABLES=glibc.malloc.hugetlb=1"]
+        assert tunables == [b"GLIBC_TUNABLES=" + wanted.encode()]
         with outcore.SceneClient(huge.address, timeout=30) as client:
             assert client.scene_info()["triangle_count"] > 0
     finally:

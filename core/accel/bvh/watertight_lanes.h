@@ -14,6 +14,7 @@
 #include <cstdint>
 
 #include "core/accel/bvh/simd_lanes.h"
+#include "core/accel/bvh/triangle_hit.h"
 #include "core/accel/bvh/watertight_triangle_test.h"
 
 #if defined(__x86_64__) || defined(__i386__)
@@ -41,6 +42,13 @@ struct WatertightRayLanes {
 template <class V>
 struct WatertightLaneHits {
   alignas(32) float t[V::kWidth], v[V::kWidth], w[V::kWidth], det[V::kWidth];
+
+  // A passing lane's hit: t and the barycentrics as the scalar test
+  // finishes them (watertight_triangle_test.h).
+  TriangleHit hit(uint32_t lane) const {
+    const float inv = 1.0f / det[lane];
+    return {t[lane], v[lane] * inv, w[lane] * inv};
+  }
 };
 
 // The watertight test's float part (watertight_triangle_test.h) on V::kWidth

@@ -160,8 +160,7 @@ class WatertightLanes {
 
   bool accept(const TrianglePacket& packet, uint32_t lane, uint32_t bit, TriangleHit& hit) const {
     if (WatertightTriangleTest::in_plane(ray_.direction, packet.triangle(lane + bit))) return false;
-    const float inv = 1.0f / hits_.det[bit];
-    hit = {hits_.t[bit], hits_.v[bit] * inv, hits_.w[bit] * inv};
+    hit = hits_.hit(bit);
     return true;
   }
 

@@ -403,13 +403,12 @@ class WatertightPacket {
       if (WatertightTriangleTest::in_plane(direction_[lane], tri)) continue;
       Hit& best = hits_[ids_[lane]];
       if (!hit_is_better(found.t[lane], geometry_id, primitive_id, best)) continue;
-      const float inv = 1.0f / found.det[lane];
       best.t = found.t[lane];
       best.geometry_id = geometry_id;
       best.primitive_id = primitive_id;
       found_packet_[lane] = &packet;
       found_slot_lane_[lane] = slot_lane;
-      found_hit_[lane] = {found.t[lane], found.v[lane] * inv, found.w[lane] * inv};
+      found_hit_[lane] = found.hit(lane);
       tmax_[lane] = found.t[lane];  // inclusive: a tie may still win on its id
     }
   }

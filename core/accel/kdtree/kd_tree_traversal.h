@@ -193,29 +193,50 @@ inline void traverse(const KdTreeView& tree, const Ray& ray, float tmin, float& 
   walk<kMaxKdDepth>(tree.nodes.data(), planes, segment_min, segment_max, limit, leaf, observer);
 }
 
-// Tests triangles[refs[k]] for k < count that the mailbox admits over
-// (tnear, tfar] with Test, calling on_hit(triangle, hit) for each hit; on_hit
-// may lower tfar and returns true to stop (then so does test_refs). The
-// watertight test takes four references at a time (watertight_ref_lanes.h),
-// the others one.
-template <class Test, class Mailbox, class OnHit>
-inline bool test_refs(const typename Test::Prepared& prepared, const uint32_t* refs, uint32_t count,
-                      const Triangle* triangles, Mailbox& mailbox, float tnear, const float& tfar,
-                      OnHit&& on_hit) {
+// A leaf's (a cell's) triangle references tested for one ray with Test:
+// the watertight test four at a time on x86 (watertight_ref_lanes.h, its
+// lanes prepared once per ray), the others, and a lone reference, one at a
+// time. Bitwise the same hits either way.
+struct NoRefLanes {
+  template <class Prepared>
+  explicit NoRefLanes(const Prepared&) {}
+};
 #if defined(__x86_64__) || defined(__i386__)
-  if constexpr (std::is_same_v<Test, WatertightTriangleTest>) {
-    if (count > 1)
-      return WatertightRefLanes(prepared).test(refs, count, triangles, mailbox, tnear, tfar, on_hit);
-  }
+template <class Test>
+using RefLanesFor =
+    std::conditional_t<std::is_same_v<Test, WatertightTriangleTest>, WatertightRefLanes, NoRefLanes>;
+#else
+template <class Test>
+using RefLanesFor = NoRefLanes;
 #endif
-  for (uint32_t k = 0; k < count; ++k) {
-    const uint32_t tri = refs[k];
-    if (!mailbox.first_visit(tri)) continue;
-    TriangleHit h;
-    if (Test::hit(prepared, triangles[tri], tnear, tfar, h) && on_hit(tri, h)) return true;
+
+template <class Test>
+class RefTests {
+ public:
+  explicit RefTests(const Ray& ray) : prepared_(Test::prepare(ray)), lanes_(prepared_) {}
+
+  // Tests triangles[refs[k]] for k < count that the mailbox admits over
+  // (tnear, tfar], calling on_hit(triangle, hit) for each hit; on_hit may
+  // lower tfar and returns true to stop (then so does test()).
+  template <class Mailbox, class OnHit>
+  bool test(const uint32_t* refs, uint32_t count, const Triangle* triangles, Mailbox& mailbox, float tnear,
+            const float& tfar, OnHit&& on_hit) {
+    if constexpr (!std::is_same_v<RefLanesFor<Test>, NoRefLanes>) {
+      if (count > 1) return lanes_.test(refs, count, triangles, mailbox, tnear, tfar, on_hit);
+    }
+    for (uint32_t k = 0; k < count; ++k) {
+      const uint32_t tri = refs[k];
+      if (!mailbox.first_visit(tri)) continue;
+      TriangleHit h;
+      if (Test::hit(prepared_, triangles[tri], tnear, tfar, h) && on_hit(tri, h)) return true;
+    }
+    return false;
   }
-  return false;
-}
+
+ private:
+  const typename Test::Prepared prepared_;
+  [[no_unique_address]] RefLanesFor<Test> lanes_;
+};
 
 // Closest and any hit over the leaves (cells) a structure's traversal
 // visits, shared by the kd-tree, the BSP tree and the grid:
@@ -226,7 +247,7 @@ template <class Test, class View, class Walk, class Mailbox = NoMailbox>
 bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk, Mailbox&& mailbox = Mailbox{}) {
   float limit = ray.tfar < best.t ? ray.tfar : best.t;
   if (!(limit > ray.tnear)) return false;
-  const typename Test::Prepared prepared = Test::prepare(ray);
+  RefTests<Test> tests(ray);
   uint32_t found = kInvalidId;
   TriangleHit found_hit{};
   walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
@@ -241,8 +262,7 @@ bool closest_hit(const View& tree, const Ray& ray, Hit& best, Walk&& walk, Mailb
       best_t = h.t;  // inclusive: a tie may still win on its id
       return false;
     };
-    test_refs<Test>(prepared, &tree.refs[first], count, tree.triangles.data(), mailbox, ray.tnear, best_t,
-                    on_hit);
+    tests.test(&tree.refs[first], count, tree.triangles.data(), mailbox, ray.tnear, best_t, on_hit);
     return false;
   });
   if (found == kInvalidId) return false;
@@ -256,11 +276,11 @@ template <class Test, class View, class Walk, class Mailbox = NoMailbox>
 bool any_hit(const View& tree, const Ray& ray, Walk&& walk, Mailbox&& mailbox = Mailbox{}) {
   float limit = ray.tfar;
   if (!(limit > ray.tnear)) return false;
-  const typename Test::Prepared prepared = Test::prepare(ray);
+  RefTests<Test> tests(ray);
   bool hit = false;
   walk(ray.tnear, limit, [&](uint32_t first, uint32_t count, float& best_t) {
-    hit = test_refs<Test>(prepared, &tree.refs[first], count, tree.triangles.data(), mailbox, ray.tnear,
-                          best_t, [](uint32_t, const TriangleHit&) { return true; });
+    hit = tests.test(&tree.refs[first], count, tree.triangles.data(), mailbox, ray.tnear, best_t,
+                     [](uint32_t, const TriangleHit&) { return true; });
     if (hit) best_t = -std::numeric_limits<float>::infinity();  // ends the walk
     return hit;
   });

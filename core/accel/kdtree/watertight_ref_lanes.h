@@ -75,8 +75,7 @@ class WatertightRefLanes {
       const auto lane = static_cast<uint32_t>(__builtin_ctz(bits));
       const uint32_t tri = ids_[lane];
       if (WatertightTriangleTest::in_plane(direction_, triangles[tri])) continue;
-      const float inv = 1.0f / found_.det[lane];
-      if (on_hit(tri, TriangleHit{found_.t[lane], found_.v[lane] * inv, found_.w[lane] * inv})) return true;
+      if (on_hit(tri, found_.hit(lane))) return true;
     }
     return false;
   }
